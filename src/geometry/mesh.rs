@@ -1,0 +1,184 @@
+use bytemuck::PodCastError;
+use glam::Vec3;
+
+/// A triangle as its three vertices.
+pub type Triangle = [Vec3; 3];
+
+/// `true` if no ray can hit `tri`: a vertex is not finite, or the cross product of its edges
+/// `(v1 - v0) x (v2 - v0)`, evaluated in `f32`, is exactly zero (coincident or collinear
+/// vertices).
+///
+/// Every triangle kernel applies this same predicate, so scalar and SIMD kernels agree on it.
+///
+/// ```
+/// use strahl::{Vec3, geometry::is_degenerate};
+/// assert!(!is_degenerate(&[Vec3::ZERO, Vec3::X, Vec3::Y]));
+/// assert!(is_degenerate(&[Vec3::ZERO, Vec3::X, Vec3::X * 2.0]));
+/// assert!(is_degenerate(&[Vec3::ZERO, Vec3::X, Vec3::splat(f32::NAN)]));
+/// ```
+#[inline]
+pub fn is_degenerate(tri: &Triangle) -> bool {
+    if !(tri[0].is_finite() && tri[1].is_finite() && tri[2].is_finite()) {
+        return true;
+    }
+    let e1 = tri[1] - tri[0];
+    let e2 = tri[2] - tri[0];
+    let n = e1.cross(e2);
+    n.x == 0.0 && n.y == 0.0 && n.z == 0.0
+}
+
+/// Errors from reading geometry out of byte buffers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GeometryError {
+    /// The byte buffer's length is not a multiple of the element size.
+    BadLength {
+        /// Which buffer.
+        what: &'static str,
+        /// Its length in bytes.
+        len: usize,
+        /// The element size it must be a multiple of.
+        element: usize,
+    },
+    /// The byte buffer is not aligned to 4 bytes.
+    Misaligned {
+        /// Which buffer.
+        what: &'static str,
+    },
+}
+
+impl core::fmt::Display for GeometryError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::BadLength { what, len, element } => {
+                write!(f, "{what}: {len} bytes is not a multiple of the {element}-byte element")
+            }
+            Self::Misaligned { what } => write!(f, "{what}: buffer is not 4-byte aligned"),
+        }
+    }
+}
+
+impl core::error::Error for GeometryError {}
+
+fn cast<'a, T: bytemuck::Pod>(what: &'static str, bytes: &'a [u8]) -> Result<&'a [T], GeometryError> {
+    bytemuck::try_cast_slice(bytes).map_err(|e| match e {
+        PodCastError::TargetAlignmentGreaterAndInputNotAligned => GeometryError::Misaligned { what },
+        _ => GeometryError::BadLength { what, len: bytes.len(), element: core::mem::size_of::<T>() },
+    })
+}
+
+/// Read access to a set of triangles, however they are stored.
+///
+/// Builders and brute-force references take `&impl Triangles`.
+pub trait Triangles {
+    /// Number of triangles (including invalid ones).
+    fn len(&self) -> usize;
+    /// `true` if there are no triangles.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Triangle `i`, or `None` if it cannot be formed (an index out of range).
+    /// Out-of-range `i` also gives `None`.
+    fn triangle(&self, i: usize) -> Option<Triangle>;
+}
+
+/// Triangles as shared vertex positions and three `u32` indices each, borrowed without copying.
+///
+/// ```
+/// use strahl::{Vec3, geometry::{IndexedMesh, Triangles}};
+/// let positions = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z];
+/// let indices = [[0, 1, 2], [0, 2, 3], [0, 1, 9]];
+/// let mesh = IndexedMesh::new(&positions, &indices);
+/// assert_eq!(mesh.len(), 3);
+/// assert_eq!(mesh.triangle(1), Some([Vec3::ZERO, Vec3::Y, Vec3::Z]));
+/// assert_eq!(mesh.triangle(2), None); // index 9 is out of range: never a panic
+///
+/// // The same mesh from raw little-endian bytes (say, a file read into memory):
+/// let pos_bytes: &[u8] = bytemuck::cast_slice(&positions);
+/// let idx_bytes: &[u8] = bytemuck::cast_slice(&indices);
+/// let mesh = IndexedMesh::from_bytes(pos_bytes, idx_bytes).unwrap();
+/// assert_eq!(mesh.triangle(0), Some([Vec3::ZERO, Vec3::X, Vec3::Y]));
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct IndexedMesh<'a> {
+    /// Vertex positions.
+    pub positions: &'a [Vec3],
+    /// Three vertex indices per triangle.
+    pub indices: &'a [[u32; 3]],
+}
+
+impl<'a> IndexedMesh<'a> {
+    /// Borrows positions and indices.
+    pub fn new(positions: &'a [Vec3], indices: &'a [[u32; 3]]) -> Self {
+        Self { positions, indices }
+    }
+
+    /// Views byte buffers of packed `[f32; 3]` positions and `[u32; 3]` indices (native endian,
+    /// 4-byte aligned) without copying.
+    pub fn from_bytes(positions: &'a [u8], indices: &'a [u8]) -> Result<Self, GeometryError> {
+        Ok(Self { positions: cast("positions", positions)?, indices: cast("indices", indices)? })
+    }
+}
+
+impl Triangles for IndexedMesh<'_> {
+    #[inline]
+    fn len(&self) -> usize {
+        self.indices.len()
+    }
+    #[inline]
+    fn triangle(&self, i: usize) -> Option<Triangle> {
+        let [a, b, c] = *self.indices.get(i)?;
+        let p = self.positions;
+        Some([*p.get(a as usize)?, *p.get(b as usize)?, *p.get(c as usize)?])
+    }
+}
+
+/// Triangles stored as three vertices each (36 bytes a triangle), borrowed without copying.
+///
+/// ```
+/// use strahl::{Vec3, geometry::{TriangleSoup, Triangles}};
+/// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
+/// let soup = TriangleSoup::new(&tris);
+/// assert_eq!(soup.triangle(0), Some(tris[0]));
+/// let soup = TriangleSoup::from_bytes(bytemuck::cast_slice(&tris)).unwrap();
+/// assert_eq!(soup.len(), 1);
+/// assert!(TriangleSoup::from_bytes(&[0u8; 35]).is_err());
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct TriangleSoup<'a> {
+    /// The triangles.
+    pub triangles: &'a [Triangle],
+}
+
+impl<'a> TriangleSoup<'a> {
+    /// Borrows triangles.
+    pub fn new(triangles: &'a [Triangle]) -> Self {
+        Self { triangles }
+    }
+
+    /// Views a byte buffer of packed `[[f32; 3]; 3]` triangles without copying.
+    pub fn from_bytes(bytes: &'a [u8]) -> Result<Self, GeometryError> {
+        Ok(Self { triangles: cast("triangles", bytes)? })
+    }
+}
+
+impl Triangles for TriangleSoup<'_> {
+    #[inline]
+    fn len(&self) -> usize {
+        self.triangles.len()
+    }
+    #[inline]
+    fn triangle(&self, i: usize) -> Option<Triangle> {
+        self.triangles.get(i).copied()
+    }
+}
+
+impl Triangles for [Triangle] {
+    #[inline]
+    fn len(&self) -> usize {
+        <[Triangle]>::len(self)
+    }
+    #[inline]
+    fn triangle(&self, i: usize) -> Option<Triangle> {
+        self.get(i).copied()
+    }
+}

@@ -1,0 +1,214 @@
+//! Ray/box slab test, robust as in Ize, "Robust BVH Ray Traversal" (JCGT 2013).
+//!
+//! For each axis the ray's entry and exit distances are `(bound - origin) * inv_dir`, with the near
+//! bound chosen by the **sign bit** of the direction component. The box is hit when
+//! `max(near_x, near_y, near_z, tmin) <= min(far_x, far_y, far_z, tmax) * (1 + 2 gamma(3))`.
+//!
+//! # Policy (identical in every width)
+//! - **Conservative far bound.** Each distance carries three roundings (subtraction, reciprocal,
+//!   product), so the far distance is scaled by `1 + 2 gamma(3)` (Ize 2013, eq. 8): a ray that
+//!   touches a box in exact arithmetic is never culled. The price is that boxes a few ULPs away may
+//!   be visited too; a BVH only loses a little time.
+//! - **`+0` and `-0` direction components.** `1 / +-0 = +-inf` and the near bound follows the sign
+//!   bit, so both zeros give the same answer: a ray parallel to a slab overlaps it for every `t`
+//!   when its origin lies in the closed interval `[min, max]` of that axis, and never otherwise.
+//! - **Origin exactly on a slab plane with a zero direction component** gives `0 * inf = NaN`.
+//!   The reductions ignore NaN candidates ([`max_l`](crate::math::max_l) returns its second operand
+//!   on NaN), so that axis does not constrain the ray: the ray lies in the face plane and touches
+//!   the closed box. This also makes a zero-thickness (flat) box hittable by rays in its plane.
+//! - **Zero-thickness boxes** (`min == max` on an axis, e.g. a flat triangle's box) are hit by rays
+//!   crossing their plane: near and far distances coincide and the test is `<=`.
+//! - **Invalid (NaN) rays** miss: their [`PreparedRay`] has an empty interval.
+//! - **Empty boxes** (`min = +inf`, `max = -inf`, as used for unused lanes) always miss.
+//! - **Boxes with a NaN bound** are not culled on that axis (conservative; BVH builders never make
+//!   them).
+//!
+//! The returned entry distance is `max(near, tmin)` (not rounded down), for near-to-far ordering.
+
+use super::PreparedRay;
+use crate::geometry::Aabb;
+use crate::math::{Lane, f32x4, f32x8, gamma, max_l, min_l};
+
+/// Scale of the far distance that makes the test conservative: `1 + 2 gamma(3)`.
+pub const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
+
+/// `N` boxes in structure-of-arrays form: `min[axis]` holds lane `i`'s lower bound on `axis`.
+///
+/// ```
+/// use strahl::{Aabb, Vec3, intersect::AabbX8};
+/// let b = AabbX8::from_boxes(&[Aabb::new(Vec3::ZERO, Vec3::ONE)]);
+/// assert_eq!(b.get(0), Aabb::new(Vec3::ZERO, Vec3::ONE));
+/// assert!(b.get(7).is_empty()); // unused lanes hold the empty box
+/// ```
+#[derive(Clone, Copy, Debug)]
+#[repr(C)]
+pub struct AabbLanes<L> {
+    /// Lower bounds per axis.
+    pub min: [L; 3],
+    /// Upper bounds per axis.
+    pub max: [L; 3],
+}
+
+/// Four boxes, SoA.
+pub type AabbX4 = AabbLanes<f32x4>;
+/// Eight boxes, SoA.
+pub type AabbX8 = AabbLanes<f32x8>;
+
+impl<L: Lane> AabbLanes<L> {
+    /// All lanes empty.
+    pub fn empty() -> Self {
+        Self { min: [L::splat(f32::INFINITY); 3], max: [L::splat(f32::NEG_INFINITY); 3] }
+    }
+
+    /// Packs up to `N` boxes; lanes past `boxes.len()` are empty. Extra boxes are ignored.
+    pub fn from_boxes(boxes: &[Aabb]) -> Self {
+        let mut lo = [[f32::INFINITY; 8]; 3];
+        let mut hi = [[f32::NEG_INFINITY; 8]; 3];
+        for (i, b) in boxes.iter().take(L::N).enumerate() {
+            for a in 0..3 {
+                lo[a][i] = b.min[a];
+                hi[a][i] = b.max[a];
+            }
+        }
+        Self { min: lo.map(|v| L::load(&v)), max: hi.map(|v| L::load(&v)) }
+    }
+
+    /// Lane `i` as an [`Aabb`].
+    pub fn get(&self, i: usize) -> Aabb {
+        let f = |v: &[L; 3]| glam::Vec3::new(v[0].lane(i), v[1].lane(i), v[2].lane(i));
+        Aabb::new(f(&self.min), f(&self.max))
+    }
+}
+
+/// Scalar reference: the entry distance if `ray` hits `b`, else `None`.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, intersect::{PreparedRay, intersect_aabb_scalar}};
+/// let b = Aabb::new(Vec3::splat(-1.0), Vec3::ONE);
+/// let r = PreparedRay::new(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z));
+/// assert_eq!(intersect_aabb_scalar(&r, &b), Some(4.0));
+/// // A flat box (zero thickness in z) is hit by a ray crossing its plane:
+/// let flat = Aabb::new(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.0));
+/// assert_eq!(intersect_aabb_scalar(&r, &flat), Some(5.0));
+/// ```
+#[inline]
+pub fn intersect_aabb_scalar(ray: &PreparedRay, b: &Aabb) -> Option<f32> {
+    let mut near = ray.tmin;
+    let mut far = ray.tmax;
+    // Walk the axes from z to x so the reduction order matches the lane kernels.
+    for a in (0..3).rev() {
+        let (lo, hi) = if ray.neg[a] { (b.max[a], b.min[a]) } else { (b.min[a], b.max[a]) };
+        let o = ray.origin[a];
+        let inv = ray.inv_dir[a];
+        // NaN candidates (0 * inf) are dropped by max_l / min_l (second operand wins).
+        near = max_l((lo - o) * inv, near);
+        far = min_l((hi - o) * inv, far);
+    }
+    if near <= far * FAR_SCALE { Some(near) } else { None }
+}
+
+/// One ray against `N` boxes: entry distances and the bit mask of lanes hit.
+#[inline(always)]
+pub fn intersect_aabb_lanes<L: Lane>(ray: &PreparedRay, b: &AabbLanes<L>) -> (L, u32) {
+    let mut near = L::splat(ray.tmin);
+    let mut far = L::splat(ray.tmax);
+    for a in (0..3).rev() {
+        let (lo, hi) = if ray.neg[a] { (b.max[a], b.min[a]) } else { (b.min[a], b.max[a]) };
+        let o = L::splat(ray.origin[a]);
+        let inv = L::splat(ray.inv_dir[a]);
+        near = ((lo - o) * inv).max_l(near);
+        far = ((hi - o) * inv).min_l(far);
+    }
+    let hit = near.le(far * L::splat(FAR_SCALE));
+    (near, hit.bitmask())
+}
+
+/// One ray against 4 boxes. Bit `i` of the mask is set where lane `i` is hit; the entry distances of
+/// missed lanes are meaningless.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, intersect::{AabbX4, PreparedRay, intersect_aabb_x4}};
+/// let boxes = AabbX4::from_boxes(&[
+///     Aabb::new(Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, 1.0, 3.0)),
+///     Aabb::new(Vec3::new(5.0, 5.0, 2.0), Vec3::new(6.0, 6.0, 3.0)),
+/// ]);
+/// let r = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+/// let (near, mask) = intersect_aabb_x4(&r, &boxes);
+/// assert_eq!(mask, 0b0001);
+/// assert_eq!(near.to_array()[0], 2.0);
+/// ```
+#[inline]
+pub fn intersect_aabb_x4(ray: &PreparedRay, b: &AabbX4) -> (f32x4, u32) {
+    intersect_aabb_lanes(ray, b)
+}
+
+/// One ray against 8 boxes; see [`intersect_aabb_x4`].
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, intersect::{AabbX8, PreparedRay, intersect_aabb_x8}};
+/// let boxes = AabbX8::from_boxes(&[Aabb::new(Vec3::splat(-1.0), Vec3::ONE); 8]);
+/// let r = PreparedRay::new(&Ray::new(Vec3::new(0.0, 0.0, -3.0), Vec3::Z));
+/// assert_eq!(intersect_aabb_x8(&r, &boxes).1, 0xff);
+/// ```
+#[inline]
+pub fn intersect_aabb_x8(ray: &PreparedRay, b: &AabbX8) -> (f32x8, u32) {
+    intersect_aabb_lanes(ray, b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Ray, Vec3};
+
+    fn hit(o: Vec3, d: Vec3, b: Aabb) -> bool {
+        let r = PreparedRay::new(&Ray::new(o, d));
+        let s = intersect_aabb_scalar(&r, &b).is_some();
+        assert_eq!(s, intersect_aabb_x4(&r, &AabbX4::from_boxes(&[b; 4])).1 == 0xf);
+        assert_eq!(s, intersect_aabb_x8(&r, &AabbX8::from_boxes(&[b; 8])).1 == 0xff);
+        s
+    }
+
+    #[test]
+    fn edge_case_table() {
+        let unit = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let flat = Aabb::new(Vec3::new(0.0, 0.0, 0.5), Vec3::new(1.0, 1.0, 0.5));
+        let cases: &[(&str, Vec3, Vec3, Aabb, bool)] = &[
+            ("straight in", Vec3::new(0.5, 0.5, -1.0), Vec3::Z, unit, true),
+            ("behind", Vec3::new(0.5, 0.5, 2.0), Vec3::Z, unit, false),
+            ("origin inside", Vec3::splat(0.5), Vec3::X, unit, true),
+            ("+0 parallel inside", Vec3::new(0.5, 0.5, -1.0), Vec3::new(0.0, 0.0, 1.0), unit, true),
+            ("-0 parallel inside", Vec3::new(0.5, 0.5, -1.0), Vec3::new(-0.0, -0.0, 1.0), unit, true),
+            ("+0 parallel outside", Vec3::new(1.5, 0.5, -1.0), Vec3::new(0.0, 0.0, 1.0), unit, false),
+            ("-0 parallel outside", Vec3::new(1.5, 0.5, -1.0), Vec3::new(-0.0, 0.0, 1.0), unit, false),
+            ("+0 origin on min plane", Vec3::new(0.0, 0.5, -1.0), Vec3::new(0.0, 0.0, 1.0), unit, true),
+            ("-0 origin on min plane", Vec3::new(0.0, 0.5, -1.0), Vec3::new(-0.0, 0.0, 1.0), unit, true),
+            ("+0 origin on max plane", Vec3::new(1.0, 0.5, -1.0), Vec3::new(0.0, 0.0, 1.0), unit, true),
+            ("-0 origin on max plane", Vec3::new(1.0, 0.5, -1.0), Vec3::new(-0.0, 0.0, 1.0), unit, true),
+            ("origin on an edge line", Vec3::new(1.0, 1.0, -1.0), Vec3::new(0.0, -0.0, 1.0), unit, true),
+            ("flat box crossed", Vec3::new(0.5, 0.5, -1.0), Vec3::Z, flat, true),
+            ("flat box crossed backwards", Vec3::new(0.5, 0.5, 2.0), -Vec3::Z, flat, true),
+            ("flat box, ray in its plane", Vec3::new(-1.0, 0.5, 0.5), Vec3::X, flat, true),
+            ("flat box, ray above its plane", Vec3::new(-1.0, 0.5, 0.6), Vec3::X, flat, false),
+            ("flat box missed", Vec3::new(1.5, 0.5, -1.0), Vec3::Z, flat, false),
+            ("diagonal through corner", Vec3::splat(-1.0), Vec3::ONE, unit, true),
+            ("empty box", Vec3::ZERO, Vec3::ONE, Aabb::EMPTY, false),
+            ("NaN origin", Vec3::new(f32::NAN, 0.5, -1.0), Vec3::Z, unit, false),
+            ("NaN direction", Vec3::new(0.5, 0.5, -1.0), Vec3::new(0.0, f32::NAN, 1.0), unit, false),
+            ("zero direction", Vec3::splat(0.5), Vec3::ZERO, unit, false),
+            ("inf origin", Vec3::new(f32::INFINITY, 0.5, 0.5), -Vec3::X, unit, false),
+        ];
+        for (name, o, d, b, want) in cases {
+            assert_eq!(hit(*o, *d, *b), *want, "{name}");
+        }
+    }
+
+    #[test]
+    fn tmin_tmax_are_honoured() {
+        let unit = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let r = |t0, t1| PreparedRay::new(&Ray::with_range(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, t0, t1));
+        assert!(intersect_aabb_scalar(&r(0.0, 0.5), &unit).is_none());
+        assert!(intersect_aabb_scalar(&r(2.5, 9.0), &unit).is_none());
+        assert_eq!(intersect_aabb_scalar(&r(1.5, 9.0), &unit), Some(1.5));
+        assert!(intersect_aabb_scalar(&r(0.0, 1.0), &unit).is_some()); // touching at t = 1
+    }
+}

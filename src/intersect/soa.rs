@@ -1,0 +1,120 @@
+//! Structure-of-arrays triangle storage for the `x4` / `x8` kernels, and the lane reductions.
+
+use crate::geometry::{Hit, INVALID, Triangle, is_degenerate};
+use crate::math::{Lane, f32x4, f32x8};
+use glam::Vec3;
+
+/// `N` triangles in structure-of-arrays form, with the primitive index of each lane and a mask of
+/// the lanes that can be hit.
+///
+/// `v[j][axis]` holds vertex `j`'s coordinate on `axis` for all lanes. The vertices are stored as
+/// given (not as edges) so that the watertight test sees shared vertices bit for bit; Möller-Trumbore
+/// forms the edges on the fly. Lane `i` can be hit only if bit `i` of `valid` is set: packing clears
+/// it for unused lanes and for [degenerate](crate::geometry::is_degenerate) triangles, so the
+/// kernels need no degeneracy test of their own.
+///
+/// ```
+/// use strahl::{Vec3, intersect::TriangleX8};
+/// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::ZERO, Vec3::X, Vec3::X]];
+/// let soa = TriangleX8::pack(&tris, &[10, 11]);
+/// assert_eq!(soa.valid, 0b01); // lane 1 is degenerate, lanes 2..8 are unused
+/// assert_eq!(soa.prim[0], 10);
+/// assert_eq!(soa.get(0), tris[0]);
+/// ```
+#[derive(Clone, Copy, Debug)]
+#[repr(C)]
+pub struct TriangleLanes<L, const N: usize> {
+    /// Vertices: `v[vertex][axis]`, one lane per triangle.
+    pub v: [[L; 3]; 3],
+    /// Primitive index reported for each lane.
+    pub prim: [u32; N],
+    /// Bit `i` set if lane `i` holds a hittable triangle.
+    pub valid: u32,
+}
+
+/// Four triangles, SoA.
+pub type TriangleX4 = TriangleLanes<f32x4, 4>;
+/// Eight triangles, SoA.
+pub type TriangleX8 = TriangleLanes<f32x8, 8>;
+
+impl<L: Lane, const N: usize> TriangleLanes<L, N> {
+    const _LANES_MATCH: () = assert!(L::N == N);
+
+    /// Packs up to `N` triangles with their primitive indices (`prims[i]` for `tris[i]`; missing
+    /// indices default to the position `i`). Unused lanes are zero and invalid.
+    pub fn pack(tris: &[Triangle], prims: &[u32]) -> Self {
+        let () = Self::_LANES_MATCH;
+        let mut c = [[[0.0f32; 8]; 3]; 3];
+        let mut prim = [INVALID; N];
+        let mut valid = 0;
+        for (i, t) in tris.iter().take(N).enumerate() {
+            for (j, vtx) in t.iter().enumerate() {
+                for a in 0..3 {
+                    c[j][a][i] = vtx[a];
+                }
+            }
+            prim[i] = prims.get(i).copied().unwrap_or(i as u32);
+            if !is_degenerate(t) {
+                valid |= 1 << i;
+            }
+        }
+        Self { v: c.map(|vtx| vtx.map(|axis| L::load(&axis))), prim, valid }
+    }
+
+    /// Triangle of lane `i`.
+    pub fn get(&self, i: usize) -> Triangle {
+        self.v.map(|vtx| Vec3::new(vtx[0].lane(i), vtx[1].lane(i), vtx[2].lane(i)))
+    }
+}
+
+/// Per-lane hit records of a packet kernel: lane `i` is meaningful where the packet's hit mask has
+/// bit `i` set (`prim[i] != INVALID`).
+#[derive(Clone, Copy, Debug)]
+pub struct HitLanes<L, const N: usize> {
+    /// Hit distances (`+inf` where no hit).
+    pub t: L,
+    /// Barycentric `u`.
+    pub u: L,
+    /// Barycentric `v`.
+    pub v: L,
+    /// Primitive index per lane, or [`INVALID`].
+    pub prim: [u32; N],
+}
+
+impl<L: Lane, const N: usize> Default for HitLanes<L, N> {
+    fn default() -> Self {
+        Self { t: L::splat(f32::INFINITY), u: L::splat(0.0), v: L::splat(0.0), prim: [INVALID; N] }
+    }
+}
+
+impl<L: Lane, const N: usize> HitLanes<L, N> {
+    /// Lane `i` as a [`Hit`] ([`Hit::NONE`] where no hit).
+    pub fn get(&self, i: usize) -> Hit {
+        if self.prim[i] == INVALID {
+            return Hit::NONE;
+        }
+        Hit { t: self.t.lane(i), u: self.u.lane(i), v: self.v.lane(i), prim: self.prim[i] }
+    }
+}
+
+/// The closest hit among the lanes in `mask`; ties go to the lowest lane (as a scalar loop over the
+/// lanes with a strict `<` would).
+#[inline(always)]
+pub(crate) fn closest_lane<L: Lane>(mut mask: u32, t: L, u: L, v: L, prim: &[u32]) -> Option<Hit> {
+    if mask == 0 {
+        return None;
+    }
+    let mut ta = [0.0f32; 8];
+    t.store(&mut ta);
+    let mut best = f32::INFINITY;
+    let mut lane = usize::MAX;
+    while mask != 0 {
+        let i = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        if ta[i] < best || lane == usize::MAX {
+            best = ta[i];
+            lane = i;
+        }
+    }
+    Some(Hit { t: best, u: u.lane(lane), v: v.lane(lane), prim: prim[lane] })
+}

@@ -1,0 +1,15 @@
+#![no_std]
+#![warn(missing_docs)]
+//! strahl: CPU ray-tracing kernels (crate docs are written in src/lib.rs).
+
+#[cfg(feature = "alloc")]
+extern crate alloc;
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod geometry;
+pub mod intersect;
+pub mod math;
+
+pub use geometry::{Aabb, Hit, Ray};
+pub use glam::Vec3;

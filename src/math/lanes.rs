@@ -1,0 +1,180 @@
+//! The [`Lane`] trait: the small set of lane-wise operations the kernels need, implemented for
+//! `wide`'s [`f32x4`] and [`f32x8`] with one NaN policy (see the module docs of
+//! [`math`](crate::math)).
+
+use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
+use wide::{f32x4, f32x8};
+
+/// A vector of `N` `f32` lanes. Comparison results are lane masks of the same type (all bits set
+/// where true), combined with `&` and `|`.
+pub trait Lane:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + BitAnd<Output = Self>
+    + BitOr<Output = Self>
+    + Send
+    + Sync
+    + 'static
+{
+    /// Number of lanes.
+    const N: usize;
+    /// All lanes set to `v`.
+    fn splat(v: f32) -> Self;
+    /// Loads lanes from the first `N` values of `s` (`s.len() >= N`).
+    fn load(s: &[f32]) -> Self;
+    /// Writes the lanes to the first `N` values of `out`.
+    fn store(self, out: &mut [f32]);
+    /// Lane `i` (slow; for tests and rare paths).
+    fn lane(self, i: usize) -> f32;
+    /// Per lane: `self > rhs ? self : rhs` (NaN in either yields `rhs`).
+    fn max_l(self, rhs: Self) -> Self;
+    /// Per lane: `self < rhs ? self : rhs` (NaN in either yields `rhs`).
+    fn min_l(self, rhs: Self) -> Self;
+    /// Mask of `self > rhs`.
+    fn gt(self, rhs: Self) -> Self;
+    /// Mask of `self >= rhs`.
+    fn ge(self, rhs: Self) -> Self;
+    /// Mask of `self < rhs`.
+    fn lt(self, rhs: Self) -> Self;
+    /// Mask of `self <= rhs`.
+    fn le(self, rhs: Self) -> Self;
+    /// Mask of `self == rhs`.
+    fn eq(self, rhs: Self) -> Self;
+    /// Mask of `self != rhs` (true for NaN).
+    fn ne(self, rhs: Self) -> Self;
+    /// `mask ? a : b` per lane; `self` is the mask.
+    fn select(self, a: Self, b: Self) -> Self;
+    /// Bit `i` set where lane `i`'s sign bit (of a mask: its truth) is set.
+    fn bitmask(self) -> u32;
+    /// Flips the sign of lanes whose sign bit is set in `sign` (`self ^ (sign & -0.0)`).
+    fn xor_sign(self, sign: Self) -> Self;
+    /// Clears the sign bits.
+    fn abs(self) -> Self;
+}
+
+macro_rules! impl_lane {
+    ($t:ty, $n:expr) => {
+        impl Lane for $t {
+            const N: usize = $n;
+            #[inline(always)]
+            fn splat(v: f32) -> Self {
+                <$t>::splat(v)
+            }
+            #[inline(always)]
+            fn load(s: &[f32]) -> Self {
+                let mut a = [0.0f32; $n];
+                a.copy_from_slice(&s[..$n]);
+                <$t>::new(a)
+            }
+            #[inline(always)]
+            fn store(self, out: &mut [f32]) {
+                out[..$n].copy_from_slice(&self.to_array());
+            }
+            #[inline(always)]
+            fn lane(self, i: usize) -> f32 {
+                self.to_array()[i]
+            }
+            #[inline(always)]
+            fn max_l(self, rhs: Self) -> Self {
+                // x86 MAXPS is exactly `a > b ? a : b`; elsewhere spell it out.
+                #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+                {
+                    self.fast_max(rhs)
+                }
+                #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+                {
+                    <$t>::select(self.simd_gt(rhs), self, rhs)
+                }
+            }
+            #[inline(always)]
+            fn min_l(self, rhs: Self) -> Self {
+                #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+                {
+                    self.fast_min(rhs)
+                }
+                #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+                {
+                    <$t>::select(self.simd_lt(rhs), self, rhs)
+                }
+            }
+            #[inline(always)]
+            fn gt(self, rhs: Self) -> Self {
+                self.simd_gt(rhs)
+            }
+            #[inline(always)]
+            fn ge(self, rhs: Self) -> Self {
+                self.simd_ge(rhs)
+            }
+            #[inline(always)]
+            fn lt(self, rhs: Self) -> Self {
+                self.simd_lt(rhs)
+            }
+            #[inline(always)]
+            fn le(self, rhs: Self) -> Self {
+                self.simd_le(rhs)
+            }
+            #[inline(always)]
+            fn eq(self, rhs: Self) -> Self {
+                self.simd_eq(rhs)
+            }
+            #[inline(always)]
+            fn ne(self, rhs: Self) -> Self {
+                self.simd_ne(rhs)
+            }
+            #[inline(always)]
+            fn select(self, a: Self, b: Self) -> Self {
+                <$t>::select::<$t>(self, a, b)
+            }
+            #[inline(always)]
+            fn bitmask(self) -> u32 {
+                self.to_bitmask() as u32
+            }
+            #[inline(always)]
+            fn xor_sign(self, sign: Self) -> Self {
+                self ^ (sign & <$t>::splat(-0.0))
+            }
+            #[inline(always)]
+            fn abs(self) -> Self {
+                <$t>::abs(self)
+            }
+        }
+    };
+}
+
+impl_lane!(f32x4, 4);
+impl_lane!(f32x8, 8);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{max_l, min_l};
+
+    const SPECIALS: [f32; 8] = [0.0, -0.0, 1.0, -1.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e-40];
+
+    fn check<L: Lane>() {
+        for &a in &SPECIALS {
+            for &b in &SPECIALS {
+                let (la, lb) = (L::splat(a), L::splat(b));
+                for i in 0..L::N {
+                    assert_eq!(la.max_l(lb).lane(i).to_bits(), max_l(a, b).to_bits(), "max {a} {b}");
+                    assert_eq!(la.min_l(lb).lane(i).to_bits(), min_l(a, b).to_bits(), "min {a} {b}");
+                    assert_eq!(la.gt(lb).bitmask() >> i & 1 == 1, a > b);
+                    assert_eq!(la.ge(lb).bitmask() >> i & 1 == 1, a >= b);
+                    assert_eq!(la.lt(lb).bitmask() >> i & 1 == 1, a < b);
+                    assert_eq!(la.le(lb).bitmask() >> i & 1 == 1, a <= b);
+                    assert_eq!(la.eq(lb).bitmask() >> i & 1 == 1, a == b);
+                    assert_eq!(la.ne(lb).bitmask() >> i & 1 == 1, a != b);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_match_scalar_semantics() {
+        check::<f32x4>();
+        check::<f32x8>();
+    }
+}

@@ -1,0 +1,81 @@
+//! Lane types and float helpers shared by every kernel.
+//!
+//! Every SIMD kernel in strahl is written once over the [`Lane`] trait and instantiated for
+//! [`f32x4`] and [`f32x8`] (from the `wide` crate). The scalar references use the free functions
+//! [`max_l`] and [`min_l`], whose NaN behaviour is defined to match the lane versions exactly, so a
+//! scalar kernel and a wide kernel that perform the same operations in the same order give
+//! bit-identical results.
+//!
+//! # NaN policy of `max_l` / `min_l`
+//!
+//! `max_l(a, b)` returns `a` if `a > b`, otherwise `b`; `min_l(a, b)` returns `a` if `a < b`,
+//! otherwise `b`. If either operand is NaN the **second** operand is returned. This is exactly the
+//! behaviour of x86's `MAXPS`/`MINPS`, and the kernels use it on purpose: an accumulator passed as
+//! the second operand ignores NaN candidates (see the slab test in
+//! [`intersect::aabb`](crate::intersect::aabb)).
+//!
+//! # Width selection
+//!
+//! `wide` picks its implementation from the compile-time target features: with AVX (for example
+//! `-C target-cpu=native` on a recent x86-64), [`f32x8`] is one 256-bit register; without it, two
+//! 128-bit halves. Results are identical either way.
+
+mod lanes;
+
+pub use lanes::Lane;
+pub use wide::{f32x4, f32x8, i32x4, i32x8, u32x4, u32x8};
+
+/// Returns `a` if `a > b`, else `b` (so a NaN in either operand yields `b`).
+///
+/// ```
+/// use strahl::math::max_l;
+/// assert_eq!(max_l(2.0, 1.0), 2.0);
+/// assert_eq!(max_l(f32::NAN, 1.0), 1.0);
+/// assert!(max_l(1.0, f32::NAN).is_nan());
+/// ```
+#[inline(always)]
+pub fn max_l(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// Returns `a` if `a < b`, else `b` (so a NaN in either operand yields `b`).
+///
+/// ```
+/// use strahl::math::min_l;
+/// assert_eq!(min_l(2.0, 1.0), 1.0);
+/// assert_eq!(min_l(f32::NAN, 1.0), 1.0);
+/// ```
+#[inline(always)]
+pub fn min_l(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// Machine epsilon of `f32` as used in error analysis: half an ULP of 1, `2^-24`.
+pub const UNIT_ROUNDOFF: f32 = f32::EPSILON * 0.5;
+
+/// The error bound `gamma(n) = n u / (1 - n u)` of Higham (and pbrt), `u` = [`UNIT_ROUNDOFF`].
+///
+/// A value computed with `n` rounded operations lies within a relative `gamma(n)` of the exact
+/// result.
+///
+/// ```
+/// let g = strahl::math::gamma(3);
+/// assert!(g > 3.0 * f32::EPSILON / 2.0 && g < 3.0 * f32::EPSILON);
+/// ```
+#[inline]
+pub const fn gamma(n: u32) -> f32 {
+    let nu = n as f32 * UNIT_ROUNDOFF;
+    nu / (1.0 - nu)
+}
+
+/// Absolute value of an `f32` without `std` (clears the sign bit).
+#[inline(always)]
+pub fn abs(x: f32) -> f32 {
+    f32::from_bits(x.to_bits() & 0x7fff_ffff)
+}
+
+/// `true` if the sign bit of `x` is set (also for `-0.0` and negative NaNs).
+#[inline(always)]
+pub fn sign_bit(x: f32) -> bool {
+    x.to_bits() >> 31 != 0
+}
