@@ -12,7 +12,7 @@ use strahl::geometry::morton::*;
 use strahl::math::{f32x8, u32x8};
 use strahl::{Aabb, Vec3};
 
-const N: usize = 1 << 20;
+const N: usize = 1 << 13;
 
 /// Deterministic points in `[0, 1)^3` (xorshift64*), so runs are comparable without `rand`.
 fn points() -> Vec<Vec3> {

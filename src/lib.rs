@@ -10,6 +10,8 @@ extern crate std;
 pub mod geometry;
 pub mod intersect;
 pub mod math;
+#[cfg(feature = "alloc")]
+pub mod scene;
 
 pub use geometry::{Aabb, Hit, Ray};
 pub use glam::Vec3;

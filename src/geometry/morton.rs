@@ -436,6 +436,45 @@ fn spread10_x8(v: u32x8) -> u32x8 {
     x
 }
 
+/// EXPERIMENT selector
+pub const VARIANT: u32 = match option_env!("MORTON_VARIANT") { Some(s) => s.as_bytes()[0] as u32 - b'0' as u32, None => 0 };
+
+/// `spread10(v) << S` in eight lanes.
+#[inline(always)]
+fn part_x8<const S: u32>(v: u32x8) -> u32x8 {
+    if VARIANT == 0 {
+        return spread10_x8(v) << S;
+    }
+    // bytes [b0, b0, -, b1] per lane
+    const I: [i8; 32] = {
+        let mut a = [0i8; 32];
+        let mut k = 0;
+        while k < 8 {
+            let base = (4 * (k % 4)) as i8;
+            a[4 * k] = base;
+            a[4 * k + 1] = base;
+            a[4 * k + 2] = -128;
+            a[4 * k + 3] = base + 1;
+            k += 1;
+        }
+        a
+    };
+    let b: wide::u8x32 = bytemuck::cast(v);
+    let mut x: u32x8 = bytemuck::cast(b.swizzle_half_relaxed(bytemuck::cast(I)));
+    x &= u32x8::splat(0x0300_F00F);
+    if VARIANT == 1 {
+        x = (x | x << 4) & u32x8::splat(0x030C_30C3);
+        x = (x * u32x8::splat(5 << S)) & u32x8::splat(0x0924_9249 << S);
+    } else if VARIANT == 2 {
+        x = (x * u32x8::splat(17)) & u32x8::splat(0x030C_30C3);
+        x = (x * u32x8::splat(5 << S)) & u32x8::splat(0x0924_9249 << S);
+    } else {
+        x = (x | x << 4) & u32x8::splat(0x030C_30C3);
+        x = ((x << (S + 2)) | (x << S)) & u32x8::splat(0x0924_9249 << S);
+    }
+    x
+}
+
 /// The 30-bit codes of eight points given as lanes of `x`, `y`, `z`. Lane `i` equals
 /// [`morton30_scalar`] of point `i` exactly, for every input (same operations, same NaN policy).
 ///
@@ -453,7 +492,7 @@ fn spread10_x8(v: u32x8) -> u32x8 {
 #[inline(always)]
 pub fn morton30_x8(x: f32x8, y: f32x8, z: f32x8, q: &MortonQuantizer) -> u32x8 {
     let [cx, cy, cz] = q.quantize_x8(x, y, z);
-    (spread10_x8(cx) << 2) | (spread10_x8(cy) << 1) | spread10_x8(cz)
+    part_x8::<2>(cx) | part_x8::<1>(cy) | part_x8::<0>(cz)
 }
 
 /// The 63-bit codes of eight points given as lanes of `x`, `y`, `z`. Element `i` equals
@@ -481,14 +520,14 @@ pub fn morton63_x8(x: f32x8, y: f32x8, z: f32x8, q: &MortonQuantizer) -> [u64; 8
     //
     // so two 10-bit spreads per axis (one `u32x8` each) replace a 21-bit spread in `u64` lanes.
     let (one, bit10) = (u32x8::splat(1), u32x8::splat(1 << 10));
-    let lo: u32x8 = (spread10_x8(cx) << 2)
-        | (spread10_x8(cy) << 1)
-        | spread10_x8(cz)
+    let lo: u32x8 = part_x8::<2>(cx)
+        | part_x8::<1>(cy)
+        | part_x8::<0>(cz)
         | ((cy & bit10) << 21)
         | ((cz & bit10) << 20);
-    let hi: u32x8 = (spread10_x8(cx >> 11) << 3)
-        | (spread10_x8(cy >> 11) << 2)
-        | (spread10_x8(cz >> 11) << 1)
+    let hi: u32x8 = part_x8::<3>(cx >> 11)
+        | part_x8::<2>(cy >> 11)
+        | part_x8::<1>(cz >> 11)
         | ((cx >> 10) & one);
     // Zip the words into u64 lanes: [lo0, hi0, lo1, hi1, ...] in memory is lo | hi << 32 on a
     // little-endian target, [hi0, lo0, ...] on a big-endian one.

@@ -22,6 +22,13 @@
 //!   or an exactly zero edge cross product) is never hit.
 //! - A reported `t` is never NaN: it satisfies `tmin <= t < tmax`.
 //! - Boxes: see [`aabb`] for `+-0` direction components, origins on slab planes and flat boxes.
+//!
+//! # Range
+//! The triangle tests form products of three coordinates (relative to the ray origin), so they are
+//! accurate while those coordinates stay within about `1e-12 ..= 1e12` in magnitude (cubes within
+//! `f32`'s normal range). Beyond `~7e12` the products overflow and the result is a miss, never a
+//! NaN distance; below `~1e-12` they underflow and `t` loses relative accuracy. Scenes in
+//! kilometres with millimetre detail (`1e-3 ..= 1e6`) are well inside.
 
 pub mod aabb;
 pub mod moller;
@@ -130,5 +137,99 @@ impl PreparedRay {
 impl From<&Ray> for PreparedRay {
     fn from(ray: &Ray) -> Self {
         Self::new(ray)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Hit, Triangle};
+
+    type Kernel = fn(&PreparedRay, &Triangle, u32) -> Option<Hit>;
+
+    /// Every width of both tests on one ray and one triangle; asserts they agree, returns the hit.
+    fn all_widths(ray: &Ray, tri: &Triangle) -> [Option<Hit>; 2] {
+        let pre = PreparedRay::new(ray);
+        let x4 = TriangleX4::pack(&[*tri], &[0]);
+        let x8 = TriangleX8::pack(&[*tri], &[0]);
+        let wide = [
+            [moller::intersect_x4(&pre, &x4), moller::intersect_x8(&pre, &x8)],
+            [watertight::intersect_x4(&pre, &x4), watertight::intersect_x8(&pre, &x8)],
+        ];
+        let scalar: [Kernel; 2] = [moller::intersect_scalar, watertight::intersect_scalar];
+        core::array::from_fn(|k| {
+            let s = scalar[k](&pre, tri, 0);
+            assert_eq!(wide[k], [s, s], "test {k}: widths disagree on {ray:?} {tri:?}");
+            let mut p = PreparedPacket8::new(&[*ray; 8]);
+            let mut h = HitLanes::default();
+            let m = if k == 0 {
+                moller::intersect_packet(&mut p, tri, 0, &mut h)
+            } else {
+                watertight::intersect_packet(&mut p, tri, 0, &mut h)
+            };
+            assert_eq!(m, if s.is_some() { 0xff } else { 0 });
+            s
+        })
+    }
+
+    #[test]
+    fn triangle_edge_case_table() {
+        let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+        let flipped = [tri[0], tri[2], tri[1]];
+        let nan = Vec3::splat(f32::NAN);
+        let o = Vec3::ZERO;
+        // (name, ray, triangle, expected t for both tests or None)
+        let cases: &[(&str, Ray, Triangle, Option<f32>)] = &[
+            ("front", Ray::new(o, Vec3::Z), tri, Some(2.0)),
+            ("back face (both windings hit)", Ray::new(o, Vec3::Z), flipped, Some(2.0)),
+            ("behind the origin", Ray::new(o, -Vec3::Z), tri, None),
+            ("unnormalised direction", Ray::new(o, Vec3::Z * 4.0), tri, Some(0.5)),
+            ("parallel, in the plane", Ray::new(Vec3::new(-5.0, 0.0, 2.0), Vec3::X), tri, None),
+            ("parallel, off the plane", Ray::new(o, Vec3::X), tri, None),
+            ("tmax exclusive", Ray::with_range(o, Vec3::Z, 0.0, 2.0), tri, None),
+            ("tmin inclusive", Ray::with_range(o, Vec3::Z, 2.0, 3.0), tri, Some(2.0)),
+            ("beyond tmax", Ray::with_range(o, Vec3::Z, 0.0, 1.0), tri, None),
+            ("-0 direction components", Ray::new(o, Vec3::new(-0.0, -0.0, 1.0)), tri, Some(2.0)),
+            ("outside", Ray::new(Vec3::new(5.0, 0.0, 0.0), Vec3::Z), tri, None),
+            ("NaN origin", Ray::new(nan, Vec3::Z), tri, None),
+            ("NaN direction", Ray::new(o, Vec3::new(0.0, f32::NAN, 1.0)), tri, None),
+            ("inf direction", Ray::new(o, Vec3::new(0.0, 0.0, f32::INFINITY)), tri, None),
+            ("zero direction", Ray::new(o, Vec3::ZERO), tri, None),
+            ("NaN tmax", Ray::with_range(o, Vec3::Z, 0.0, f32::NAN), tri, None),
+            ("NaN vertex", Ray::new(o, Vec3::Z), [tri[0], nan, tri[2]], None),
+            ("inf vertex", Ray::new(o, Vec3::Z), [tri[0], Vec3::INFINITY, tri[2]], None),
+            ("zero area (two equal vertices)", Ray::new(Vec3::new(0.0, -1.0, 0.0), Vec3::Z), [tri[0], tri[1], tri[1]], None),
+            ("zero area (collinear)", Ray::new(o, Vec3::Z), [Vec3::new(-1.0, 0.0, 2.0), Vec3::new(0.0, 0.0, 2.0), Vec3::new(1.0, 0.0, 2.0)], None),
+            ("all vertices equal", Ray::new(Vec3::new(1.0, 1.0, 0.0), Vec3::Z), [Vec3::new(1.0, 1.0, 2.0); 3], None),
+            ("needle", Ray::new(o, Vec3::Z), [Vec3::new(0.0, -1.0, 2.0), Vec3::new(1e-6, 1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)], Some(2.0)),
+            ("large (1e12)", Ray::new(o, Vec3::Z), tri.map(|v| v * 1e12), Some(2e12)),
+            ("small (1e-12)", Ray::new(o, Vec3::Z), tri.map(|v| v * 1e-12), Some(2e-12)),
+            ("out of range (1e18): overflow is a miss, never NaN", Ray::new(o, Vec3::Z), tri.map(|v| v * 1e18), None),
+        ];
+        // Tolerance on t: 4 ULP (relative 2^-21).
+        let close = |a: Option<f32>, b: Option<f32>| match (a, b) {
+            (Some(a), Some(b)) => (a - b).abs() <= b.abs() * 4.8e-7,
+            (a, b) => a == b,
+        };
+        for (name, ray, t, want) in cases {
+            for (k, got) in all_widths(ray, t).iter().enumerate() {
+                let got = got.map(|h| h.t);
+                assert!(close(got, *want), "{name} (test {k}): got {got:?}, want {want:?}");
+            }
+        }
+    }
+
+    /// The edge function `U` rounds to 0 in `f32` but is `+2^-30` exactly, while `V` and `W` are
+    /// negative: the origin lies just outside the edge BC, so the exact answer is a miss. Without
+    /// the `f64` recomputation the `f32` test would report a hit.
+    #[test]
+    fn watertight_f64_fallback_rejects_rounded_edge() {
+        let e = |k: i32| libm::ldexpf(1.0, -k);
+        let tri = [Vec3::new(1.0, -1.0, 1.0), Vec3::new(1.0 + e(15), 1.0 + e(14), 1.0), Vec3::new(-1.0, -(1.0 + e(15)), 1.0)];
+        let (bx, by, cx, cy) = (tri[1].x, tri[1].y, tri[2].x, tri[2].y);
+        assert_eq!(cx * by - cy * bx, 0.0, "the f32 edge function rounds to zero");
+        assert!((cx as f64) * (by as f64) - (cy as f64) * (bx as f64) > 0.0, "but is positive");
+        let [_, wt] = all_widths(&Ray::new(Vec3::ZERO, Vec3::Z), &tri);
+        assert_eq!(wt, None);
     }
 }
