@@ -1,6 +1,53 @@
+//! # strahl: CPU ray-tracing kernels
+//!
+//! strahl ("ray") is a `no_std`, data-oriented SIMD kernel crate for engines that trace rays on the
+//! CPU. Every kernel has a scalar reference beside it, written separately, and SIMD forms for 4 and
+//! 8 lanes that give **bit-identical** results (same operations in the same order, one NaN policy).
+//!
+//! ## The pipeline
+//! ```text
+//!  triangles ──► geometry ──► build ──► layout ──► traverse ──► hits ──► (shading: yours)
+//!  (bytes,       Aabb, Ray,   BVH2       BVH4/8    single ray,
+//!   meshes)      Morton       builders   collapse  packets
+//!                   │                                 │
+//!                   └────────► intersect ◄────────────┘  slab test, Möller-Trumbore, watertight
+//!  volumes ──► volume (ray marching) ──► composite (over / depth, sort-last schedules)
+//! ```
+//! Present today: [`geometry`] (boxes, rays, hits, zero-copy triangle input, Morton codes),
+//! [`intersect`] (robust slab test, Möller-Trumbore and watertight ray/triangle tests in scalar,
+//! x4, x8 and packet form), [`math`] (lane types) and [`scene`] (bundled bunny, procedural meshes).
+//! BVH construction, wide BVHs and traversal, volume rendering and compositing follow.
+//!
+//! ## Example
+//! ```
+//! use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX8, watertight}};
+//! let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+//! let leaf = TriangleX8::pack(&[tri], &[0]); // up to 8 triangles in SoA form
+//! let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+//! let hit = watertight::intersect_x8(&ray, &leaf).unwrap();
+//! assert_eq!((hit.t, hit.prim), (2.0, 0));
+//! ```
+//!
+//! ## Features
+//! | feature | default | what it adds |
+//! |---|---|---|
+//! | (none) | | all kernels: slab test, triangle tests, Morton codes, on caller-provided slices; `#![no_std]`, no allocation |
+//! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); later the BVH builders |
+//! | `std` | yes | `alloc`, plus std's float intrinsics in `glam` |
+//!
+//! ## Where the tunables live
+//! | stage | knob | where |
+//! |---|---|---|
+//! | slab test | conservative far-bound scale `1 + 2 gamma(3)` | [`intersect::aabb::FAR_SCALE`] |
+//! | Morton codes | bits per axis (10 or 21), quantisation bounds | [`geometry::morton::MortonQuantizer`] |
+//! | SIMD width | `wide` picks AVX / SSE / NEON from target features | build with `-C target-cpu=native` |
+//!
+//! ## Bad input
+//! Kernels never panic. Invalid rays (NaN, infinite, zero direction) hit nothing; degenerate or
+//! non-finite triangles are never hit; a reported distance is never NaN. See [`intersect`] for the
+//! full policy, including `+-0` direction components and flat boxes.
 #![no_std]
 #![warn(missing_docs)]
-//! strahl: CPU ray-tracing kernels (crate docs are written in src/lib.rs).
 
 #[cfg(feature = "alloc")]
 extern crate alloc;

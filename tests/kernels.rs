@@ -9,19 +9,25 @@ mod common;
 use common::{bounded, grid, raw, vec3};
 use proptest::prelude::*;
 use strahl::intersect::{
-    AabbX4, AabbX8, HitLanes, PreparedPacket4, PreparedPacket8, PreparedRay, TriangleX4, TriangleX8,
-    intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8, moller, watertight,
+    AabbX4, AabbX8, HitLanes, PreparedPacket4, PreparedPacket8, PreparedRay, TriangleX4,
+    TriangleX8, intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8, moller, watertight,
 };
 use strahl::{Aabb, Hit, Ray, Vec3, geometry::Triangle};
 
 type Scalar = fn(&PreparedRay, &Triangle, u32) -> Option<Hit>;
-const TESTS: [(&str, Scalar); 2] = [("moller", moller::intersect_scalar), ("watertight", watertight::intersect_scalar)];
+const TESTS: [(&str, Scalar); 2] = [
+    ("moller", moller::intersect_scalar),
+    ("watertight", watertight::intersect_scalar),
+];
 
 fn same_hit(a: Option<Hit>, b: Option<Hit>) -> bool {
     match (a, b) {
         (None, None) => true,
         (Some(a), Some(b)) => {
-            a.prim == b.prim && a.t.to_bits() == b.t.to_bits() && a.u.to_bits() == b.u.to_bits() && a.v.to_bits() == b.v.to_bits()
+            a.prim == b.prim
+                && a.t.to_bits() == b.t.to_bits()
+                && a.u.to_bits() == b.u.to_bits()
+                && a.v.to_bits() == b.v.to_bits()
         }
         _ => false,
     }
@@ -31,10 +37,10 @@ fn same_hit(a: Option<Hit>, b: Option<Hit>) -> bool {
 fn scalar_closest(f: Scalar, ray: &PreparedRay, tris: &[Triangle]) -> Option<Hit> {
     let mut best: Option<Hit> = None;
     for (i, t) in tris.iter().enumerate() {
-        if let Some(h) = f(ray, t, i as u32) {
-            if best.is_none_or(|b| h.t < b.t) {
-                best = Some(h);
-            }
+        if let Some(h) = f(ray, t, i as u32)
+            && best.is_none_or(|b| h.t < b.t)
+        {
+            best = Some(h);
         }
     }
     best
@@ -47,7 +53,12 @@ fn check_triangles(ray: &Ray, tris: &[Triangle; 8]) -> Result<(), TestCaseError>
     let x8 = TriangleX8::pack(tris, &prims);
     for (name, f) in TESTS {
         let (i4, i8, m4, m8): (Option<Hit>, Option<Hit>, u32, u32) = if name == "moller" {
-            (moller::intersect_x4(&pre, &x4), moller::intersect_x8(&pre, &x8), moller::hit_mask(&pre, &x4), moller::hit_mask(&pre, &x8))
+            (
+                moller::intersect_x4(&pre, &x4),
+                moller::intersect_x8(&pre, &x8),
+                moller::hit_mask(&pre, &x4),
+                moller::hit_mask(&pre, &x8),
+            )
         } else {
             (
                 watertight::intersect_x4(&pre, &x4),
@@ -63,8 +74,18 @@ fn check_triangles(ray: &Ray, tris: &[Triangle; 8]) -> Result<(), TestCaseError>
                 prop_assert_eq!(s, m4 >> i & 1 == 1, "{} x4 lane {}", name, i);
             }
         }
-        prop_assert!(same_hit(i4, scalar_closest(f, &pre, &tris[..4])), "{} x4 {:?}", name, i4);
-        prop_assert!(same_hit(i8, scalar_closest(f, &pre, tris)), "{} x8 {:?}", name, i8);
+        prop_assert!(
+            same_hit(i4, scalar_closest(f, &pre, &tris[..4])),
+            "{} x4 {:?}",
+            name,
+            i4
+        );
+        prop_assert!(
+            same_hit(i8, scalar_closest(f, &pre, tris)),
+            "{} x8 {:?}",
+            name,
+            i8
+        );
         if let Some(h) = i8 {
             prop_assert!(h.t >= pre.tmin && h.t < pre.tmax, "t outside [tmin, tmax)");
         }
@@ -79,17 +100,33 @@ fn check_packets(rays: &[Ray; 8], tri: &Triangle) -> Result<(), TestCaseError> {
         let mut p4 = PreparedPacket4::new(&rays[..4]);
         let mut h4 = HitLanes::default();
         let (m8, m4) = if name == "moller" {
-            (moller::intersect_packet(&mut p8, tri, 5, &mut h8), moller::intersect_packet(&mut p4, tri, 5, &mut h4))
+            (
+                moller::intersect_packet(&mut p8, tri, 5, &mut h8),
+                moller::intersect_packet(&mut p4, tri, 5, &mut h4),
+            )
         } else {
-            (watertight::intersect_packet(&mut p8, tri, 5, &mut h8), watertight::intersect_packet(&mut p4, tri, 5, &mut h4))
+            (
+                watertight::intersect_packet(&mut p8, tri, 5, &mut h8),
+                watertight::intersect_packet(&mut p4, tri, 5, &mut h4),
+            )
         };
         for (i, r) in rays.iter().enumerate() {
             let s = f(&PreparedRay::new(r), tri, 5);
             prop_assert_eq!(s.is_some(), m8 >> i & 1 == 1, "{} packet8 lane {}", name, i);
-            prop_assert!(same_hit(s, h8.get(i).is_hit().then(|| h8.get(i))), "{} packet8 lane {}", name, i);
+            prop_assert!(
+                same_hit(s, h8.get(i).is_hit().then(|| h8.get(i))),
+                "{} packet8 lane {}",
+                name,
+                i
+            );
             if i < 4 {
                 prop_assert_eq!(s.is_some(), m4 >> i & 1 == 1, "{} packet4 lane {}", name, i);
-                prop_assert!(same_hit(s, h4.get(i).is_hit().then(|| h4.get(i))), "{} packet4 lane {}", name, i);
+                prop_assert!(
+                    same_hit(s, h4.get(i).is_hit().then(|| h4.get(i))),
+                    "{} packet4 lane {}",
+                    name,
+                    i
+                );
             }
         }
     }
@@ -119,10 +156,25 @@ fn check_boxes(ray: &Ray, boxes: &[Aabb; 8]) -> Result<(), TestCaseError> {
 
 /// A ray from a random origin towards a random point of triangle `k` (so hits are common), or in a
 /// random direction; random `[tmin, tmax)`.
-fn ray_towards<S: Strategy<Value = f32> + Clone + 'static>(s: S, tris: [Triangle; 8]) -> impl Strategy<Value = Ray> {
-    (vec3(s.clone()), vec3(s), 0usize..8, 0.0f32..1.0, 0.0f32..1.0, any::<bool>(), 0u8..4).prop_map(
-        move |(o, d, k, a, b, aim, range)| {
-            let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
+fn ray_towards<S: Strategy<Value = f32> + Clone + 'static>(
+    s: S,
+    tris: [Triangle; 8],
+) -> impl Strategy<Value = Ray> {
+    (
+        vec3(s.clone()),
+        vec3(s),
+        0usize..8,
+        0.0f32..1.0,
+        0.0f32..1.0,
+        any::<bool>(),
+        0u8..4,
+    )
+        .prop_map(move |(o, d, k, a, b, aim, range)| {
+            let (a, b) = if a + b > 1.0 {
+                (1.0 - a, 1.0 - b)
+            } else {
+                (a, b)
+            };
             let tri = tris[k];
             let target = tri[0] + (tri[1] - tri[0]) * a + (tri[2] - tri[0]) * b;
             let dir = if aim { target - o } else { d };
@@ -133,23 +185,32 @@ fn ray_towards<S: Strategy<Value = f32> + Clone + 'static>(s: S, tris: [Triangle
                 _ => (0.0, 0.999),
             };
             Ray::with_range(o, dir, tmin, tmax)
-        },
-    )
+        })
 }
 
-fn scene<S: Strategy<Value = f32> + Clone + 'static>(s: S) -> impl Strategy<Value = (Ray, [Triangle; 8])> {
+fn scene<S: Strategy<Value = f32> + Clone + 'static>(
+    s: S,
+) -> impl Strategy<Value = (Ray, [Triangle; 8])> {
     let tri = (vec3(s.clone()), vec3(s.clone()), vec3(s.clone())).prop_map(|(a, b, c)| [a, b, c]);
-    proptest::array::uniform8(tri).prop_flat_map(move |tris| (ray_towards(s.clone(), tris), Just(tris)))
+    proptest::array::uniform8(tri)
+        .prop_flat_map(move |tris| (ray_towards(s.clone(), tris), Just(tris)))
 }
 
 fn raw_ray() -> impl Strategy<Value = Ray> {
-    (vec3(raw()), vec3(raw()), raw(), raw()).prop_map(|(o, d, t0, t1)| Ray::with_range(o, d, t0, t1))
+    (vec3(raw()), vec3(raw()), raw(), raw())
+        .prop_map(|(o, d, t0, t1)| Ray::with_range(o, d, t0, t1))
 }
 
 fn boxes<S: Strategy<Value = f32> + Clone + 'static>(s: S) -> impl Strategy<Value = [Aabb; 8]> {
-    proptest::array::uniform8((vec3(s.clone()), vec3(s), any::<bool>()).prop_map(|(a, b, sorted)| {
-        if sorted { Aabb::new(a.min(b), a.max(b)) } else { Aabb::new(a, b) }
-    }))
+    proptest::array::uniform8((vec3(s.clone()), vec3(s), any::<bool>()).prop_map(
+        |(a, b, sorted)| {
+            if sorted {
+                Aabb::new(a.min(b), a.max(b))
+            } else {
+                Aabb::new(a, b)
+            }
+        },
+    ))
 }
 
 proptest! {
@@ -258,11 +319,17 @@ fn boxes_grid_against_exact() {
         let b = Aabb::new(to(lo), to(hi));
         let got = intersect_aabb_scalar(&ray, &b).is_some();
         // Conservative: never a false miss. A false hit may only happen within rounding of a touch.
-        assert!(!exact || got, "false miss: o {o:?} d {d:?} box {lo:?}..{hi:?}");
+        assert!(
+            !exact || got,
+            "false miss: o {o:?} d {d:?} box {lo:?}..{hi:?}"
+        );
         if got && !exact {
             // The exact near/far gap must be tiny relative to the distances.
             let gap = tn_num as f64 / tn_den as f64 - tf_num as f64 / tf_den as f64;
-            assert!(gap <= 1e-5 * (tn_num as f64 / tn_den as f64).abs().max(1.0), "false hit: o {o:?} d {d:?} box {lo:?}..{hi:?}");
+            assert!(
+                gap <= 1e-5 * (tn_num as f64 / tn_den as f64).abs().max(1.0),
+                "false hit: o {o:?} d {d:?} box {lo:?}..{hi:?}"
+            );
         }
     }
 }

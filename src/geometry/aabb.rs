@@ -1,5 +1,5 @@
-use bytemuck::{Pod, Zeroable};
 use crate::math::{max_l, min_l};
+use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
 /// An axis-aligned bounding box, closed on both sides: a point `p` is inside when
@@ -38,7 +38,10 @@ impl Default for Aabb {
 
 impl Aabb {
     /// The empty box (`min = +inf`, `max = -inf`): the identity of [`union`](Self::union).
-    pub const EMPTY: Self = Self { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY };
+    pub const EMPTY: Self = Self {
+        min: Vec3::INFINITY,
+        max: Vec3::NEG_INFINITY,
+    };
 
     /// The box with the given corners (not checked; `min > max` on an axis makes it empty).
     #[inline]
@@ -72,8 +75,16 @@ impl Aabb {
     #[inline]
     pub fn grow(&mut self, p: Vec3) {
         // min_l / max_l return their second operand when the first is NaN.
-        self.min = Vec3::new(min_l(p.x, self.min.x), min_l(p.y, self.min.y), min_l(p.z, self.min.z));
-        self.max = Vec3::new(max_l(p.x, self.max.x), max_l(p.y, self.max.y), max_l(p.z, self.max.z));
+        self.min = Vec3::new(
+            min_l(p.x, self.min.x),
+            min_l(p.y, self.min.y),
+            min_l(p.z, self.min.z),
+        );
+        self.max = Vec3::new(
+            max_l(p.x, self.max.x),
+            max_l(p.y, self.max.y),
+            max_l(p.z, self.max.z),
+        );
     }
 
     /// Extends the box to contain `other`.
@@ -89,8 +100,16 @@ impl Aabb {
         let lo = |a: f32, b: f32| min_l(a, b);
         let hi = |a: f32, b: f32| max_l(a, b);
         Aabb {
-            min: Vec3::new(lo(other.min.x, self.min.x), lo(other.min.y, self.min.y), lo(other.min.z, self.min.z)),
-            max: Vec3::new(hi(other.max.x, self.max.x), hi(other.max.y, self.max.y), hi(other.max.z, self.max.z)),
+            min: Vec3::new(
+                lo(other.min.x, self.min.x),
+                lo(other.min.y, self.min.y),
+                lo(other.min.z, self.min.z),
+            ),
+            max: Vec3::new(
+                hi(other.max.x, self.max.x),
+                hi(other.max.y, self.max.y),
+                hi(other.max.z, self.max.z),
+            ),
         }
     }
 
@@ -186,7 +205,13 @@ mod tests {
     #[test]
     fn longest_axis_ties_go_low() {
         assert_eq!(Aabb::new(Vec3::ZERO, Vec3::ONE).longest_axis(), 0);
-        assert_eq!(Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 2.0)).longest_axis(), 1);
-        assert_eq!(Aabb::new(Vec3::ZERO, Vec3::new(1.0, 1.0, 2.0)).longest_axis(), 2);
+        assert_eq!(
+            Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 2.0)).longest_axis(),
+            1
+        );
+        assert_eq!(
+            Aabb::new(Vec3::ZERO, Vec3::new(1.0, 1.0, 2.0)).longest_axis(),
+            2
+        );
     }
 }

@@ -50,7 +50,10 @@ impl core::fmt::Display for GeometryError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::BadLength { what, len, element } => {
-                write!(f, "{what}: {len} bytes is not a multiple of the {element}-byte element")
+                write!(
+                    f,
+                    "{what}: {len} bytes is not a multiple of the {element}-byte element"
+                )
             }
             Self::Misaligned { what } => write!(f, "{what}: buffer is not 4-byte aligned"),
         }
@@ -59,10 +62,19 @@ impl core::fmt::Display for GeometryError {
 
 impl core::error::Error for GeometryError {}
 
-fn cast<'a, T: bytemuck::Pod>(what: &'static str, bytes: &'a [u8]) -> Result<&'a [T], GeometryError> {
+fn cast<'a, T: bytemuck::Pod>(
+    what: &'static str,
+    bytes: &'a [u8],
+) -> Result<&'a [T], GeometryError> {
     bytemuck::try_cast_slice(bytes).map_err(|e| match e {
-        PodCastError::TargetAlignmentGreaterAndInputNotAligned => GeometryError::Misaligned { what },
-        _ => GeometryError::BadLength { what, len: bytes.len(), element: core::mem::size_of::<T>() },
+        PodCastError::TargetAlignmentGreaterAndInputNotAligned => {
+            GeometryError::Misaligned { what }
+        }
+        _ => GeometryError::BadLength {
+            what,
+            len: bytes.len(),
+            element: core::mem::size_of::<T>(),
+        },
     })
 }
 
@@ -115,7 +127,10 @@ impl<'a> IndexedMesh<'a> {
     /// Views byte buffers of packed `[f32; 3]` positions and `[u32; 3]` indices (native endian,
     /// 4-byte aligned) without copying.
     pub fn from_bytes(positions: &'a [u8], indices: &'a [u8]) -> Result<Self, GeometryError> {
-        Ok(Self { positions: cast("positions", positions)?, indices: cast("indices", indices)? })
+        Ok(Self {
+            positions: cast("positions", positions)?,
+            indices: cast("indices", indices)?,
+        })
     }
 }
 
@@ -128,7 +143,11 @@ impl Triangles for IndexedMesh<'_> {
     fn triangle(&self, i: usize) -> Option<Triangle> {
         let [a, b, c] = *self.indices.get(i)?;
         let p = self.positions;
-        Some([*p.get(a as usize)?, *p.get(b as usize)?, *p.get(c as usize)?])
+        Some([
+            *p.get(a as usize)?,
+            *p.get(b as usize)?,
+            *p.get(c as usize)?,
+        ])
     }
 }
 
@@ -157,7 +176,9 @@ impl<'a> TriangleSoup<'a> {
 
     /// Views a byte buffer of packed `[[f32; 3]; 3]` triangles without copying.
     pub fn from_bytes(bytes: &'a [u8]) -> Result<Self, GeometryError> {
-        Ok(Self { triangles: cast("triangles", bytes)? })
+        Ok(Self {
+            triangles: cast("triangles", bytes)?,
+        })
     }
 }
 

@@ -42,9 +42,9 @@
 //! - **The minimum corner** maps to cell 0, code 0.
 //! - **Points outside the bounds** clamp to the first or last cell of each axis.
 //! - **A flat axis** (extent zero, negative or not finite; also a positive extent so small that
-//!   `levels / extent` overflows) gets `scale = 0`, so it never produces NaN from `0 * inf` in the
-//!   scale and every point quantises to cell 0 on it. The empty box [`Aabb::EMPTY`] and boxes with
-//!   a NaN bound are flat on every axis: all their codes are 0.
+//!   `levels / extent` overflows) gets `scale = 0` instead of an infinite or NaN scale, and every
+//!   point quantises to cell 0 on it. The empty box [`Aabb::EMPTY`] and boxes with a NaN bound are
+//!   flat on every axis: all their codes are 0.
 //! - **A NaN coordinate** quantises to cell 0 on that axis; `+inf` to the last cell (or 0 on a flat
 //!   axis, where `inf * 0` is NaN); `-inf` to cell 0.
 //! - **Order.** Cells, and hence codes, never decrease when one coordinate grows and the others
@@ -79,16 +79,29 @@
 //!   (v | v <<  2)   ---- 9--8 --7- -6-- 5--4 --3- -2-- 1--0   & 0x0924_9249
 //! ```
 //!
-//! No `pdep` (BMI2): it is microcoded and slow on AMD Zen 1 and 2.
+//! The 8-lane kernels do the same in six operations per axis instead of thirteen: one byte shuffle
+//! and a mask do the first two steps (they only move whole bytes and nibbles), and a multiply by
+//! `5 << s` does the last step together with the final `<< s` (see `spread_x8_shuffle`). Targets
+//! without byte shuffles and 32-bit multiplies (plain SSE2) use the shift steps; both forms are
+//! compiled everywhere and tested against each other. No `pdep` (BMI2): it is microcoded and slow
+//! on AMD Zen 1 and 2.
 //!
 //! # Performance
 //!
 //! The 8-lane kernels use `wide`'s [`f32x8`]/[`u32x8`]; build with `-C target-cpu=native` (or at
 //! least AVX2) so that each is one 256-bit register. The 63-bit kernel never touches 64-bit
-//! lanes: it splits each 21-bit cell index into a low 10 bits, bit 10, and a high 10 bits, spreads
-//! the two 10-bit halves in 32-bit lanes and assembles the low and high words of the code. The
-//! slice functions read eight `Vec3` (96 bytes) at a time and transpose them to three [`f32x8`]
-//! with blends and one permute per axis. See `benches/morton.rs` for measured rates.
+//! lanes: the low and high 32-bit words of the code are interleaved separately, from the low 10 or
+//! 11 and the high 11 or 10 bits of each cell index, and zipped at the end. The AoS slice
+//! functions read eight `Vec3` (96 bytes) at a time and transpose them to three [`f32x8`] with two
+//! blends and one permute per axis; the SoA ones load the lanes directly and are the fastest.
+//!
+//! Measured with `benches/morton.rs` on one core of an AMD EPYC (Zen 3, AVX2), 2^20 points in the
+//! unit cube, codes per second:
+//!
+//! | | scalar | x8 | slice (AoS) | slice (SoA) |
+//! |---|---|---|---|---|
+//! | 30-bit | 0.25 G | 1.6 G | 1.1 G | 1.65 G |
+//! | 63-bit | 0.18 G | 0.88 G | 0.61 G | 0.90 G |
 //!
 //! [`max_l`]: crate::math::max_l
 //! [`min_l`]: crate::math::min_l
@@ -167,9 +180,18 @@ impl MortonQuantizer {
         let axis = |e: f32| {
             let s = levels / e;
             // NOTE: `e > 0` is false for NaN, so NaN and inverted (empty) bounds are flat too.
-            if e > 0.0 && e.is_finite() && s.is_finite() { s } else { 0.0 }
+            if e > 0.0 && e.is_finite() && s.is_finite() {
+                s
+            } else {
+                0.0
+            }
         };
-        Self { min: bounds.min, scale: Vec3::new(axis(e.x), axis(e.y), axis(e.z)), top: levels - 1.0, bits }
+        Self {
+            min: bounds.min,
+            scale: Vec3::new(axis(e.x), axis(e.y), axis(e.z)),
+            top: levels - 1.0,
+            bits,
+        }
     }
 
     /// The quantiser of 30-bit codes: 10 bits, 1024 cells per axis.
@@ -424,55 +446,86 @@ pub fn morton63_scalar(p: Vec3, q: &MortonQuantizer) -> u64 {
     encode63(q.quantize_scalar(p))
 }
 
-/// [`spread10`] in eight lanes. Input lanes must be below `2^24` (cells are): the first mask
-/// already drops bits 10..24, so no initial mask is needed.
-#[inline(always)]
-fn spread10_x8(v: u32x8) -> u32x8 {
-    let mut x = v;
-    x = (x | x << 16) & u32x8::splat(0x0300_00FF);
-    x = (x | x << 8) & u32x8::splat(0x0300_F00F);
-    x = (x | x << 4) & u32x8::splat(0x030C_30C3);
-    x = (x | x << 2) & u32x8::splat(0x0924_9249);
-    x
+/// Whether the byte-shuffle-and-multiply form of the spread is native on this target (SSSE3 byte
+/// shuffles and SSE4.1 32-bit multiplies, or NEON); otherwise the shift form is used. Both are
+/// always compiled and give identical results (unit-tested against each other in every build).
+const FAST_SPREAD: bool = cfg!(all(
+    target_endian = "little",
+    any(
+        all(target_feature = "ssse3", target_feature = "sse4.1"),
+        all(target_arch = "aarch64", target_feature = "neon"),
+        target_feature = "simd128",
+    )
+));
+
+/// Masks of the spread steps for `B` = 10 or 11 input bits. Bit 10 of an 11-bit input travels in
+/// byte 3 next to bits 8 and 9, then moves from bit 26 to bit 30 in the nibble step.
+const fn spread_masks(b: u32) -> [u32; 4] {
+    if b == 11 {
+        [0x0700_00FF, 0x0700_F00F, 0x430C_30C3, 0x4924_9249]
+    } else {
+        [0x0300_00FF, 0x0300_F00F, 0x030C_30C3, 0x0924_9249]
+    }
 }
 
-/// EXPERIMENT selector
-pub const VARIANT: u32 = match option_env!("MORTON_VARIANT") { Some(s) => s.as_bytes()[0] as u32 - b'0' as u32, None => 0 };
-
-/// `spread10(v) << S` in eight lanes.
+/// `spread(v & (2^B - 1)) << S` in eight lanes (`B` = 10 or 11, bits shifted past 31 are lost):
+/// dispatches to [`spread_x8_shuffle`] or [`spread_x8_shift`].
 #[inline(always)]
-fn part_x8<const S: u32>(v: u32x8) -> u32x8 {
-    if VARIANT == 0 {
-        return spread10_x8(v) << S;
+fn spread_x8<const B: u32, const S: u32>(v: u32x8) -> u32x8 {
+    if FAST_SPREAD {
+        spread_x8_shuffle::<B, S>(v)
+    } else {
+        spread_x8_shift::<B, S>(v)
     }
-    // bytes [b0, b0, -, b1] per lane
-    const I: [i8; 32] = {
+}
+
+/// [`spread_x8`] with the four shift/or/mask steps of [`spread10`], then the shift by `S`.
+/// Lanes must be below `2^24` (cells are): the first mask already drops bits `B..24`.
+#[inline(always)]
+fn spread_x8_shift<const B: u32, const S: u32>(v: u32x8) -> u32x8 {
+    let m = spread_masks(B);
+    let mut x = v;
+    x = (x | x << 16) & u32x8::splat(m[0]);
+    x = (x | x << 8) & u32x8::splat(m[1]);
+    x = (x | x << 4) & u32x8::splat(m[2]);
+    x = (x | x << 2) & u32x8::splat(m[3]);
+    x << S
+}
+
+/// [`spread_x8`] in six operations instead of thirteen, for any lane value:
+///
+/// ```text
+///   v                  ---- ---- ---- ---- ---- -a98 7654 3210   byte shuffle: [b0, b0, -, b1]
+///   & m1               ---- -a98 ---- ---- 7654 ---- ---- 3210   (= the first two shift steps)
+///   (x | x << 4) & m2  -a-- --98 ---- 76-- --54 ---- 32-- --10
+///   (x * 5 << S) & m3  -a-- 9--8 --7- -6-- 5--4 --3- -2-- 1--0   (<< S)
+/// ```
+///
+/// The last step is a multiply because `x | x << 2 == x * 5` when the two never overlap, and a
+/// multiply by `5 << S` also does the final shift for free.
+#[inline(always)]
+fn spread_x8_shuffle<const B: u32, const S: u32>(v: u32x8) -> u32x8 {
+    // Within each 128-bit half, lane k's bytes 4k..4k+4 become [b0, b0, 0, b1].
+    const IDX: [i8; 32] = {
         let mut a = [0i8; 32];
         let mut k = 0;
         while k < 8 {
             let base = (4 * (k % 4)) as i8;
             a[4 * k] = base;
             a[4 * k + 1] = base;
-            a[4 * k + 2] = -128;
+            a[4 * k + 2] = -128; // high bit set: zero
             a[4 * k + 3] = base + 1;
             k += 1;
         }
         a
     };
-    let b: wide::u8x32 = bytemuck::cast(v);
-    let mut x: u32x8 = bytemuck::cast(b.swizzle_half_relaxed(bytemuck::cast(I)));
-    x &= u32x8::splat(0x0300_F00F);
-    if VARIANT == 1 {
-        x = (x | x << 4) & u32x8::splat(0x030C_30C3);
-        x = (x * u32x8::splat(5 << S)) & u32x8::splat(0x0924_9249 << S);
-    } else if VARIANT == 2 {
-        x = (x * u32x8::splat(17)) & u32x8::splat(0x030C_30C3);
-        x = (x * u32x8::splat(5 << S)) & u32x8::splat(0x0924_9249 << S);
-    } else {
-        x = (x | x << 4) & u32x8::splat(0x030C_30C3);
-        x = ((x << (S + 2)) | (x << S)) & u32x8::splat(0x0924_9249 << S);
-    }
-    x
+    let m = spread_masks(B);
+    let bytes: wide::u8x32 = bytemuck::cast(v);
+    let mut x: u32x8 = bytemuck::cast(bytes.swizzle_half_relaxed(bytemuck::cast(IDX)));
+    x &= u32x8::splat(m[1]);
+    x = (x | x << 4) & u32x8::splat(m[2]);
+    // PERF: one multiply replaces shift, or and shift; LLVM turns `* 5` (S = 0) back into shifts.
+    (x * u32x8::splat(5 << S)) & u32x8::splat(m[3] << S)
 }
 
 /// The 30-bit codes of eight points given as lanes of `x`, `y`, `z`. Lane `i` equals
@@ -492,7 +545,7 @@ fn part_x8<const S: u32>(v: u32x8) -> u32x8 {
 #[inline(always)]
 pub fn morton30_x8(x: f32x8, y: f32x8, z: f32x8, q: &MortonQuantizer) -> u32x8 {
     let [cx, cy, cz] = q.quantize_x8(x, y, z);
-    part_x8::<2>(cx) | part_x8::<1>(cy) | part_x8::<0>(cz)
+    spread_x8::<10, 2>(cx) | spread_x8::<10, 1>(cy) | spread_x8::<10, 0>(cz)
 }
 
 /// The 63-bit codes of eight points given as lanes of `x`, `y`, `z`. Element `i` equals
@@ -512,26 +565,24 @@ pub fn morton30_x8(x: f32x8, y: f32x8, z: f32x8, q: &MortonQuantizer) -> u32x8 {
 #[inline(always)]
 pub fn morton63_x8(x: f32x8, y: f32x8, z: f32x8, q: &MortonQuantizer) -> [u64; 8] {
     let [cx, cy, cz] = q.quantize_x8(x, y, z);
-    // PERF: stay in 32-bit lanes. With c = h * 2^11 + m * 2^10 + l (l, h: 10 bits, m: 1 bit) per
-    // axis, the code's bits 0..32 and 32..63 are
+    // PERF: stay in 32-bit lanes. Per axis c = h * 2^11 + m * 2^10 + l (l, h: 10 bits, m: 1 bit);
+    // the code's bits 0..32 and 32..63 are
     //
     //   lo word:  31 30 | 29 .......... 0        hi word:  31 | 30 ........... 1 | 0
     //             ym zm | interleave(l)                     0 | interleave(h)    | xm
     //
-    // so two 10-bit spreads per axis (one `u32x8` each) replace a 21-bit spread in `u64` lanes.
-    let (one, bit10) = (u32x8::splat(1), u32x8::splat(1 << 10));
-    let lo: u32x8 = part_x8::<2>(cx)
-        | part_x8::<1>(cy)
-        | part_x8::<0>(cz)
-        | ((cy & bit10) << 21)
-        | ((cz & bit10) << 20);
-    let hi: u32x8 = part_x8::<3>(cx >> 11)
-        | part_x8::<2>(cy >> 11)
-        | part_x8::<1>(cz >> 11)
-        | ((cx >> 10) & one);
+    // so the low word interleaves y and z with 11 bits (their bit 10 lands on 31 and 30) and x
+    // with 10, and the high word x with 11 bits from bit 10 on and y, z with 10 bits from bit 11.
+    let lo = spread_x8::<10, 2>(cx) | spread_x8::<11, 1>(cy) | spread_x8::<11, 0>(cz);
+    let hi =
+        spread_x8::<11, 0>(cx >> 10) | spread_x8::<10, 2>(cy >> 11) | spread_x8::<10, 1>(cz >> 11);
     // Zip the words into u64 lanes: [lo0, hi0, lo1, hi1, ...] in memory is lo | hi << 32 on a
     // little-endian target, [hi0, lo0, ...] on a big-endian one.
-    let (a, b) = if cfg!(target_endian = "little") { (lo, hi) } else { (hi, lo) };
+    let (a, b) = if cfg!(target_endian = "little") {
+        (lo, hi)
+    } else {
+        (hi, lo)
+    };
     bytemuck::cast([a.unpack_lo(b), a.unpack_hi(b)])
 }
 
@@ -539,26 +590,44 @@ pub fn morton63_x8(x: f32x8, y: f32x8, z: f32x8, q: &MortonQuantizer) -> [u64; 8
 // Slices
 // ---------------------------------------------------------------------------------------------
 
-/// Transposes eight `Vec3` (as 24 floats `x0 y0 z0 x1 ...`) to lanes of `x`, `y`, `z`.
+/// Transposes eight `Vec3` (24 floats `x0 y0 z0 x1 ...`) to lanes of `x`, `y`, `z`: with blends and
+/// one cross-lane permute per axis where AVX2 has the permute ([`transpose8_permute`]), otherwise
+/// by gathering ([`transpose8_gather`]). Both are always compiled and unit-tested.
 #[inline(always)]
 fn transpose8(p: &[f32; 24]) -> [f32x8; 3] {
-    // v0 = x0 y0 z0 x1 y1 z1 x2 y2 | v1 = z2 x3 y3 z3 x4 y4 z4 x5 | v2 = y5 z5 x6 y6 z6 x7 y7 z7
+    if cfg!(target_feature = "avx2") {
+        transpose8_permute(p)
+    } else {
+        transpose8_gather(p)
+    }
+}
+
+/// [`transpose8`] float by float.
+#[inline(always)]
+fn transpose8_gather(p: &[f32; 24]) -> [f32x8; 3] {
+    [0, 1, 2].map(|a| f32x8::new(core::array::from_fn(|i| p[3 * i + a])))
+}
+
+/// [`transpose8`] with six blends and three permutes.
+#[inline(always)]
+fn transpose8_permute(p: &[f32; 24]) -> [f32x8; 3] {
+    //   v0 = x0 y0 z0 x1 y1 z1 x2 y2 | v1 = z2 x3 y3 z3 x4 y4 z4 x5 | v2 = y5 z5 x6 y6 z6 x7 y7 z7
+    // Lane l of v_k holds float 8k + l, of axis (8k + l) % 3. Per axis, take each lane from the
+    // vector that has that axis there (two blends), then put the lanes in order (one permute).
     let [v0, v1, v2]: [[u32; 8]; 3] = bytemuck::cast(*p);
     let (v0, v1, v2) = (u32x8::new(v0), u32x8::new(v1), u32x8::new(v2));
-    // Lane l of vector k holds float 8k + l, which belongs to axis (8k + l) % 3. Pick, per axis,
-    // each lane from the vector that has that axis there (blends), then put the lanes in order
-    // (one cross-lane permute).
     const ON: u32 = u32::MAX;
-    let pick = |m0: [u32; 8], m1: [u32; 8], m2: [u32; 8]| {
-        (v0 & u32x8::new(m0)) | (v1 & u32x8::new(m1)) | (v2 & u32x8::new(m2))
+    const A: [u32; 8] = [ON, 0, 0, ON, 0, 0, ON, 0];
+    const B: [u32; 8] = [0, ON, 0, 0, ON, 0, 0, ON];
+    const C: [u32; 8] = [0, 0, ON, 0, 0, ON, 0, 0];
+    // `from1`/`from2`: lanes taken from v1/v2, the rest from v0.
+    let pick = |from1: [u32; 8], from2: [u32; 8]| {
+        u32x8::new(from2).select(v2, u32x8::new(from1).select(v1, v0))
     };
-    let a = [ON, 0, 0, ON, 0, 0, ON, 0];
-    let b = [0, ON, 0, 0, ON, 0, 0, ON];
-    let c = [0, 0, ON, 0, 0, ON, 0, 0];
     // x: [x0 x3 x6 x1 x4 x7 x2 x5], y: [y5 y0 y3 y6 y1 y4 y7 y2], z: [z2 z5 z0 z3 z6 z1 z4 z7]
-    let x = pick(a, b, c).shuffle(u32x8::new([0, 3, 6, 1, 4, 7, 2, 5]));
-    let y = pick(b, c, a).shuffle(u32x8::new([1, 4, 7, 2, 5, 0, 3, 6]));
-    let z = pick(c, a, b).shuffle(u32x8::new([2, 5, 0, 3, 6, 1, 4, 7]));
+    let x = pick(B, C).shuffle(u32x8::new([0, 3, 6, 1, 4, 7, 2, 5]));
+    let y = pick(C, A).shuffle(u32x8::new([1, 4, 7, 2, 5, 0, 3, 6]));
+    let z = pick(A, B).shuffle(u32x8::new([2, 5, 0, 3, 6, 1, 4, 7]));
     [bytemuck::cast(x), bytemuck::cast(y), bytemuck::cast(z)]
 }
 
@@ -633,7 +702,13 @@ pub fn morton63_slice(points: &[Vec3], q: &MortonQuantizer, out: &mut [u64]) {
 /// assert_eq!(codes[2], MORTON30_MAX);
 /// assert_eq!(codes[9], u32::MAX); // untouched
 /// ```
-pub fn morton30_slice_soa(xs: &[f32], ys: &[f32], zs: &[f32], q: &MortonQuantizer, out: &mut [u32]) {
+pub fn morton30_slice_soa(
+    xs: &[f32],
+    ys: &[f32],
+    zs: &[f32],
+    q: &MortonQuantizer,
+    out: &mut [u32],
+) {
     let n = xs.len().min(ys.len()).min(zs.len()).min(out.len());
     let (xs, ys, zs, out) = (&xs[..n], &ys[..n], &zs[..n], &mut out[..n]);
     let (x8, _) = xs.as_chunks::<8>();
@@ -661,7 +736,13 @@ pub fn morton30_slice_soa(xs: &[f32], ys: &[f32], zs: &[f32], q: &MortonQuantize
 /// assert_eq!((codes[0], codes[2]), (0, MORTON63_MAX));
 /// assert_eq!(codes[8], morton63_scalar(Vec3::splat(0.9), &q)); // the scalar remainder
 /// ```
-pub fn morton63_slice_soa(xs: &[f32], ys: &[f32], zs: &[f32], q: &MortonQuantizer, out: &mut [u64]) {
+pub fn morton63_slice_soa(
+    xs: &[f32],
+    ys: &[f32],
+    zs: &[f32],
+    q: &MortonQuantizer,
+    out: &mut [u64],
+) {
     let n = xs.len().min(ys.len()).min(zs.len()).min(out.len());
     let (xs, ys, zs, out) = (&xs[..n], &ys[..n], &zs[..n], &mut out[..n]);
     let (x8, _) = xs.as_chunks::<8>();
@@ -725,8 +806,10 @@ mod tests {
         let odd = Aabb::new(Vec3::new(0.1, -3.7, 1.0e-3), Vec3::new(0.7, 12.3, 2.0e-3));
         let h30 = 1 << 9;
         let h63 = 1 << 20;
+        // (name, bounds, point, cells with 10 bits, cells with 21 bits)
+        type Case = (&'static str, Aabb, Vec3, [u32; 3], [u32; 3]);
         #[rustfmt::skip]
-        let table: [(&str, Aabb, Vec3, [u32; 3], [u32; 3]); 19] = [
+        let table: [Case; 19] = [
             ("min corner", unit(), Vec3::ZERO, [0; 3], [0; 3]),
             ("max corner", unit(), Vec3::ONE, [T30; 3], [T63; 3]),
             ("max corner, odd box", odd, odd.max, [T30; 3], [T63; 3]),
@@ -754,26 +837,62 @@ mod tests {
             assert_eq!(morton30_scalar(p, &q30), encode30(c30), "{name} (30)");
             assert_eq!(morton63_scalar(p, &q63), encode63(c63), "{name} (63)");
             let s = |v: f32| f32x8::splat(v);
-            assert_eq!(morton30_x8(s(p.x), s(p.y), s(p.z), &q30), u32x8::splat(encode30(c30)), "{name} x8");
-            assert_eq!(morton63_x8(s(p.x), s(p.y), s(p.z), &q63), [encode63(c63); 8], "{name} x8");
+            assert_eq!(
+                morton30_x8(s(p.x), s(p.y), s(p.z), &q30),
+                u32x8::splat(encode30(c30)),
+                "{name} x8"
+            );
+            assert_eq!(
+                morton63_x8(s(p.x), s(p.y), s(p.z), &q63),
+                [encode63(c63); 8],
+                "{name} x8"
+            );
         }
         // A positive extent whose `levels / extent` overflows is flat, not infinitely fine.
         assert_eq!(MortonQuantizer::new30(&tiny).scale(), Vec3::ZERO);
-        assert_eq!(morton30_scalar(Vec3::splat(1.0e-40), &MortonQuantizer::new30(&tiny)), 0);
-        assert_eq!(morton30_scalar(Vec3::ONE, &MortonQuantizer::new30(&unit())), MORTON30_MAX);
-        assert_eq!(morton63_scalar(Vec3::ONE, &MortonQuantizer::new63(&unit())), MORTON63_MAX);
+        assert_eq!(
+            morton30_scalar(Vec3::splat(1.0e-40), &MortonQuantizer::new30(&tiny)),
+            0
+        );
+        assert_eq!(
+            morton30_scalar(Vec3::ONE, &MortonQuantizer::new30(&unit())),
+            MORTON30_MAX
+        );
+        assert_eq!(
+            morton63_scalar(Vec3::ONE, &MortonQuantizer::new63(&unit())),
+            MORTON63_MAX
+        );
     }
 
     #[test]
     fn max_corner_is_all_ones_for_random_boxes() {
         let mut r = Rng(0x9E37_79B9_7F4A_7C15);
         for _ in 0..20_000 {
-            let (a, b) = (Vec3::new(r.f(), r.f(), r.f()), Vec3::new(r.f(), r.f(), r.f()));
+            let (a, b) = (
+                Vec3::new(r.f(), r.f(), r.f()),
+                Vec3::new(r.f(), r.f(), r.f()),
+            );
             let b = Aabb::new(a.min(b), a.max(b));
-            assert_eq!(morton30_scalar(b.max, &MortonQuantizer::new30(&b)), MORTON30_MAX, "{b:?}");
-            assert_eq!(morton63_scalar(b.max, &MortonQuantizer::new63(&b)), MORTON63_MAX, "{b:?}");
-            assert_eq!(morton30_scalar(b.min, &MortonQuantizer::new30(&b)), 0, "{b:?}");
-            assert_eq!(morton63_scalar(b.min, &MortonQuantizer::new63(&b)), 0, "{b:?}");
+            assert_eq!(
+                morton30_scalar(b.max, &MortonQuantizer::new30(&b)),
+                MORTON30_MAX,
+                "{b:?}"
+            );
+            assert_eq!(
+                morton63_scalar(b.max, &MortonQuantizer::new63(&b)),
+                MORTON63_MAX,
+                "{b:?}"
+            );
+            assert_eq!(
+                morton30_scalar(b.min, &MortonQuantizer::new30(&b)),
+                0,
+                "{b:?}"
+            );
+            assert_eq!(
+                morton63_scalar(b.min, &MortonQuantizer::new63(&b)),
+                0,
+                "{b:?}"
+            );
         }
     }
 
@@ -804,22 +923,84 @@ mod tests {
 
     #[test]
     fn transpose8_matches_layout() {
-        let mut p = [0.0f32; 24];
-        for (i, v) in p.iter_mut().enumerate() {
-            *v = i as f32;
+        let p: [f32; 24] = core::array::from_fn(|i| i as f32);
+        for [x, y, z] in [
+            transpose8(&p),
+            transpose8_gather(&p),
+            transpose8_permute(&p),
+        ] {
+            for i in 0..8 {
+                assert_eq!(x.to_array()[i], (3 * i) as f32);
+                assert_eq!(y.to_array()[i], (3 * i + 1) as f32);
+                assert_eq!(z.to_array()[i], (3 * i + 2) as f32);
+            }
         }
-        let [x, y, z] = transpose8(&p);
-        for i in 0..8 {
-            assert_eq!(x.to_array()[i], (3 * i) as f32);
-            assert_eq!(y.to_array()[i], (3 * i + 1) as f32);
-            assert_eq!(z.to_array()[i], (3 * i + 2) as f32);
+    }
+
+    /// Both forms of the lane spread equal the scalar one, for every 11-bit value and every shift
+    /// (and for the high bits of the input, which both ignore).
+    #[test]
+    fn spread_forms_agree() {
+        fn check<const B: u32, const S: u32>() {
+            let mask = (1u32 << B) - 1;
+            for base in (0..1u32 << 12).step_by(8) {
+                // Values below 2^24 (the kernels' cells are below 2^21), with junk above bit B.
+                let v = u32x8::new(core::array::from_fn(|i| {
+                    let c = base + i as u32; // every 12-bit value ...
+                    (c | (c.wrapping_mul(0x9E37) << 12)) & 0x00FF_FFFF // ... with junk up to bit 23
+                }));
+                let want = v.to_array().map(|c| {
+                    let c = c & mask;
+                    let s = if B == 10 {
+                        spread10(c)
+                    } else {
+                        spread10(c & 1023) | (c >> 10 & 1) << 30
+                    };
+                    s.wrapping_shl(S) // bits past 31 are lost
+                });
+                assert_eq!(
+                    spread_x8_shift::<B, S>(v).to_array(),
+                    want,
+                    "shift B {B} S {S}"
+                );
+                // The byte indices assume little-endian lanes (`FAST_SPREAD` checks the same).
+                if cfg!(target_endian = "little") {
+                    let got = spread_x8_shuffle::<B, S>(v).to_array();
+                    assert_eq!(got, want, "shuffle B {B} S {S}");
+                }
+                assert_eq!(spread_x8::<B, S>(v).to_array(), want);
+            }
         }
+        check::<10, 0>();
+        check::<10, 1>();
+        check::<10, 2>();
+        check::<10, 3>();
+        check::<11, 0>();
+        check::<11, 1>();
+        check::<11, 2>();
     }
 
     #[test]
     fn x8_matches_scalar_on_random_and_special_lanes() {
-        let specials = [0.0, -0.0, 1.0, NAN, INF, -INF, 1e-40, f32::MAX, f32::MIN, 0.5, -3.0, 100.0];
-        let boxes = [unit(), Aabb::EMPTY, Aabb::new(Vec3::splat(-100.0), Vec3::new(100.0, 0.0, 3.0))];
+        let specials = [
+            0.0,
+            -0.0,
+            1.0,
+            NAN,
+            INF,
+            -INF,
+            1e-40,
+            f32::MAX,
+            f32::MIN,
+            0.5,
+            -3.0,
+            100.0,
+        ];
+        let boxes = [
+            unit(),
+            Aabb::EMPTY,
+            Aabb::new(Vec3::splat(-100.0), Vec3::new(100.0, 0.0, 3.0)),
+        ];
         let mut r = Rng(777);
         for b in boxes {
             let (q30, q63) = (MortonQuantizer::new30(&b), MortonQuantizer::new63(&b));
@@ -828,7 +1009,11 @@ mod tests {
                 for a in &mut v {
                     for l in a.iter_mut() {
                         let k = r.next();
-                        *l = if round % 2 == 0 { specials[k as usize % specials.len()] } else { r.f() };
+                        *l = if round % 2 == 0 {
+                            specials[k as usize % specials.len()]
+                        } else {
+                            r.f()
+                        };
                     }
                 }
                 let (x, y, z) = (f32x8::new(v[0]), f32x8::new(v[1]), f32x8::new(v[2]));
@@ -847,7 +1032,8 @@ mod tests {
     fn slices_handle_every_length() {
         let q30 = MortonQuantizer::new30(&Aabb::new(Vec3::ZERO, Vec3::splat(20.0)));
         let q63 = MortonQuantizer::new63(&Aabb::new(Vec3::ZERO, Vec3::splat(20.0)));
-        let pts: [Vec3; 20] = core::array::from_fn(|i| Vec3::new(i as f32, 20.0 - i as f32, (i * i) as f32 * 0.1));
+        let pts: [Vec3; 20] =
+            core::array::from_fn(|i| Vec3::new(i as f32, 20.0 - i as f32, (i * i) as f32 * 0.1));
         for n in 0..=20 {
             for m in 0..=20 {
                 let (mut o30, mut o63) = ([u32::MAX; 20], [u64::MAX; 20]);

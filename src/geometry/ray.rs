@@ -43,13 +43,23 @@ impl Ray {
     /// A ray over `[0, +inf)`.
     #[inline]
     pub const fn new(origin: Vec3, direction: Vec3) -> Self {
-        Self { origin, tmin: 0.0, direction, tmax: f32::INFINITY }
+        Self {
+            origin,
+            tmin: 0.0,
+            direction,
+            tmax: f32::INFINITY,
+        }
     }
 
     /// A ray over `[tmin, tmax)`.
     #[inline]
     pub const fn with_range(origin: Vec3, direction: Vec3, tmin: f32, tmax: f32) -> Self {
-        Self { origin, tmin, direction, tmax }
+        Self {
+            origin,
+            tmin,
+            direction,
+            tmax,
+        }
     }
 
     /// The point at distance `t`.
@@ -97,7 +107,12 @@ const _: () = assert!(core::mem::size_of::<Hit>() == 16);
 
 impl Hit {
     /// No hit.
-    pub const NONE: Self = Self { t: f32::INFINITY, u: 0.0, v: 0.0, prim: INVALID };
+    pub const NONE: Self = Self {
+        t: f32::INFINITY,
+        u: 0.0,
+        v: 0.0,
+        prim: INVALID,
+    };
 
     /// `true` unless this is a miss.
     #[inline]

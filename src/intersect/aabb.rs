@@ -57,7 +57,10 @@ pub type AabbX8 = AabbLanes<f32x8>;
 impl<L: Lane> AabbLanes<L> {
     /// All lanes empty.
     pub fn empty() -> Self {
-        Self { min: [L::splat(f32::INFINITY); 3], max: [L::splat(f32::NEG_INFINITY); 3] }
+        Self {
+            min: [L::splat(f32::INFINITY); 3],
+            max: [L::splat(f32::NEG_INFINITY); 3],
+        }
     }
 
     /// Packs up to `N` boxes; lanes past `boxes.len()` are empty. Extra boxes are ignored.
@@ -70,7 +73,10 @@ impl<L: Lane> AabbLanes<L> {
                 hi[a][i] = b.max[a];
             }
         }
-        Self { min: lo.map(|v| L::load(&v)), max: hi.map(|v| L::load(&v)) }
+        Self {
+            min: lo.map(|v| L::load(&v)),
+            max: hi.map(|v| L::load(&v)),
+        }
     }
 
     /// Lane `i` as an [`Aabb`].
@@ -97,14 +103,22 @@ pub fn intersect_aabb_scalar(ray: &PreparedRay, b: &Aabb) -> Option<f32> {
     let mut far = ray.tmax;
     // Walk the axes from z to x so the reduction order matches the lane kernels.
     for a in (0..3).rev() {
-        let (lo, hi) = if ray.neg[a] { (b.max[a], b.min[a]) } else { (b.min[a], b.max[a]) };
+        let (lo, hi) = if ray.neg[a] {
+            (b.max[a], b.min[a])
+        } else {
+            (b.min[a], b.max[a])
+        };
         let o = ray.origin[a];
         let inv = ray.inv_dir[a];
         // NaN candidates (0 * inf) are dropped by max_l / min_l (second operand wins).
         near = max_l((lo - o) * inv, near);
         far = min_l((hi - o) * inv, far);
     }
-    if near <= far * FAR_SCALE { Some(near) } else { None }
+    if near <= far * FAR_SCALE {
+        Some(near)
+    } else {
+        None
+    }
 }
 
 /// One ray against `N` boxes: entry distances and the bit mask of lanes hit.
@@ -113,7 +127,11 @@ pub fn intersect_aabb_lanes<L: Lane>(ray: &PreparedRay, b: &AabbLanes<L>) -> (L,
     let mut near = L::splat(ray.tmin);
     let mut far = L::splat(ray.tmax);
     for a in (0..3).rev() {
-        let (lo, hi) = if ray.neg[a] { (b.max[a], b.min[a]) } else { (b.min[a], b.max[a]) };
+        let (lo, hi) = if ray.neg[a] {
+            (b.max[a], b.min[a])
+        } else {
+            (b.min[a], b.max[a])
+        };
         let o = L::splat(ray.origin[a]);
         let inv = L::splat(ray.inv_dir[a]);
         near = ((lo - o) * inv).max_l(near);
@@ -163,8 +181,14 @@ mod tests {
     fn hit(o: Vec3, d: Vec3, b: Aabb) -> bool {
         let r = PreparedRay::new(&Ray::new(o, d));
         let s = intersect_aabb_scalar(&r, &b).is_some();
-        assert_eq!(s, intersect_aabb_x4(&r, &AabbX4::from_boxes(&[b; 4])).1 == 0xf);
-        assert_eq!(s, intersect_aabb_x8(&r, &AabbX8::from_boxes(&[b; 8])).1 == 0xff);
+        assert_eq!(
+            s,
+            intersect_aabb_x4(&r, &AabbX4::from_boxes(&[b; 4])).1 == 0xf
+        );
+        assert_eq!(
+            s,
+            intersect_aabb_x8(&r, &AabbX8::from_boxes(&[b; 8])).1 == 0xff
+        );
         s
     }
 
@@ -173,29 +197,143 @@ mod tests {
         let unit = Aabb::new(Vec3::ZERO, Vec3::ONE);
         let flat = Aabb::new(Vec3::new(0.0, 0.0, 0.5), Vec3::new(1.0, 1.0, 0.5));
         let cases: &[(&str, Vec3, Vec3, Aabb, bool)] = &[
-            ("straight in", Vec3::new(0.5, 0.5, -1.0), Vec3::Z, unit, true),
+            (
+                "straight in",
+                Vec3::new(0.5, 0.5, -1.0),
+                Vec3::Z,
+                unit,
+                true,
+            ),
             ("behind", Vec3::new(0.5, 0.5, 2.0), Vec3::Z, unit, false),
             ("origin inside", Vec3::splat(0.5), Vec3::X, unit, true),
-            ("+0 parallel inside", Vec3::new(0.5, 0.5, -1.0), Vec3::new(0.0, 0.0, 1.0), unit, true),
-            ("-0 parallel inside", Vec3::new(0.5, 0.5, -1.0), Vec3::new(-0.0, -0.0, 1.0), unit, true),
-            ("+0 parallel outside", Vec3::new(1.5, 0.5, -1.0), Vec3::new(0.0, 0.0, 1.0), unit, false),
-            ("-0 parallel outside", Vec3::new(1.5, 0.5, -1.0), Vec3::new(-0.0, 0.0, 1.0), unit, false),
-            ("+0 origin on min plane", Vec3::new(0.0, 0.5, -1.0), Vec3::new(0.0, 0.0, 1.0), unit, true),
-            ("-0 origin on min plane", Vec3::new(0.0, 0.5, -1.0), Vec3::new(-0.0, 0.0, 1.0), unit, true),
-            ("+0 origin on max plane", Vec3::new(1.0, 0.5, -1.0), Vec3::new(0.0, 0.0, 1.0), unit, true),
-            ("-0 origin on max plane", Vec3::new(1.0, 0.5, -1.0), Vec3::new(-0.0, 0.0, 1.0), unit, true),
-            ("origin on an edge line", Vec3::new(1.0, 1.0, -1.0), Vec3::new(0.0, -0.0, 1.0), unit, true),
-            ("flat box crossed", Vec3::new(0.5, 0.5, -1.0), Vec3::Z, flat, true),
-            ("flat box crossed backwards", Vec3::new(0.5, 0.5, 2.0), -Vec3::Z, flat, true),
-            ("flat box, ray in its plane", Vec3::new(-1.0, 0.5, 0.5), Vec3::X, flat, true),
-            ("flat box, ray above its plane", Vec3::new(-1.0, 0.5, 0.6), Vec3::X, flat, false),
-            ("flat box missed", Vec3::new(1.5, 0.5, -1.0), Vec3::Z, flat, false),
-            ("diagonal through corner", Vec3::splat(-1.0), Vec3::ONE, unit, true),
+            (
+                "+0 parallel inside",
+                Vec3::new(0.5, 0.5, -1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+                unit,
+                true,
+            ),
+            (
+                "-0 parallel inside",
+                Vec3::new(0.5, 0.5, -1.0),
+                Vec3::new(-0.0, -0.0, 1.0),
+                unit,
+                true,
+            ),
+            (
+                "+0 parallel outside",
+                Vec3::new(1.5, 0.5, -1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+                unit,
+                false,
+            ),
+            (
+                "-0 parallel outside",
+                Vec3::new(1.5, 0.5, -1.0),
+                Vec3::new(-0.0, 0.0, 1.0),
+                unit,
+                false,
+            ),
+            (
+                "+0 origin on min plane",
+                Vec3::new(0.0, 0.5, -1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+                unit,
+                true,
+            ),
+            (
+                "-0 origin on min plane",
+                Vec3::new(0.0, 0.5, -1.0),
+                Vec3::new(-0.0, 0.0, 1.0),
+                unit,
+                true,
+            ),
+            (
+                "+0 origin on max plane",
+                Vec3::new(1.0, 0.5, -1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+                unit,
+                true,
+            ),
+            (
+                "-0 origin on max plane",
+                Vec3::new(1.0, 0.5, -1.0),
+                Vec3::new(-0.0, 0.0, 1.0),
+                unit,
+                true,
+            ),
+            (
+                "origin on an edge line",
+                Vec3::new(1.0, 1.0, -1.0),
+                Vec3::new(0.0, -0.0, 1.0),
+                unit,
+                true,
+            ),
+            (
+                "flat box crossed",
+                Vec3::new(0.5, 0.5, -1.0),
+                Vec3::Z,
+                flat,
+                true,
+            ),
+            (
+                "flat box crossed backwards",
+                Vec3::new(0.5, 0.5, 2.0),
+                -Vec3::Z,
+                flat,
+                true,
+            ),
+            (
+                "flat box, ray in its plane",
+                Vec3::new(-1.0, 0.5, 0.5),
+                Vec3::X,
+                flat,
+                true,
+            ),
+            (
+                "flat box, ray above its plane",
+                Vec3::new(-1.0, 0.5, 0.6),
+                Vec3::X,
+                flat,
+                false,
+            ),
+            (
+                "flat box missed",
+                Vec3::new(1.5, 0.5, -1.0),
+                Vec3::Z,
+                flat,
+                false,
+            ),
+            (
+                "diagonal through corner",
+                Vec3::splat(-1.0),
+                Vec3::ONE,
+                unit,
+                true,
+            ),
             ("empty box", Vec3::ZERO, Vec3::ONE, Aabb::EMPTY, false),
-            ("NaN origin", Vec3::new(f32::NAN, 0.5, -1.0), Vec3::Z, unit, false),
-            ("NaN direction", Vec3::new(0.5, 0.5, -1.0), Vec3::new(0.0, f32::NAN, 1.0), unit, false),
+            (
+                "NaN origin",
+                Vec3::new(f32::NAN, 0.5, -1.0),
+                Vec3::Z,
+                unit,
+                false,
+            ),
+            (
+                "NaN direction",
+                Vec3::new(0.5, 0.5, -1.0),
+                Vec3::new(0.0, f32::NAN, 1.0),
+                unit,
+                false,
+            ),
             ("zero direction", Vec3::splat(0.5), Vec3::ZERO, unit, false),
-            ("inf origin", Vec3::new(f32::INFINITY, 0.5, 0.5), -Vec3::X, unit, false),
+            (
+                "inf origin",
+                Vec3::new(f32::INFINITY, 0.5, 0.5),
+                -Vec3::X,
+                unit,
+                false,
+            ),
         ];
         for (name, o, d, b, want) in cases {
             assert_eq!(hit(*o, *d, *b), *want, "{name}");
@@ -205,7 +343,8 @@ mod tests {
     #[test]
     fn tmin_tmax_are_honoured() {
         let unit = Aabb::new(Vec3::ZERO, Vec3::ONE);
-        let r = |t0, t1| PreparedRay::new(&Ray::with_range(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, t0, t1));
+        let r =
+            |t0, t1| PreparedRay::new(&Ray::with_range(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, t0, t1));
         assert!(intersect_aabb_scalar(&r(0.0, 0.5), &unit).is_none());
         assert!(intersect_aabb_scalar(&r(2.5, 9.0), &unit).is_none());
         assert_eq!(intersect_aabb_scalar(&r(1.5, 9.0), &unit), Some(1.5));

@@ -58,12 +58,17 @@ impl<L: Lane, const N: usize> TriangleLanes<L, N> {
                 valid |= 1 << i;
             }
         }
-        Self { v: c.map(|vtx| vtx.map(|axis| L::load(&axis))), prim, valid }
+        Self {
+            v: c.map(|vtx| vtx.map(|axis| L::load(&axis))),
+            prim,
+            valid,
+        }
     }
 
     /// Triangle of lane `i`.
     pub fn get(&self, i: usize) -> Triangle {
-        self.v.map(|vtx| Vec3::new(vtx[0].lane(i), vtx[1].lane(i), vtx[2].lane(i)))
+        self.v
+            .map(|vtx| Vec3::new(vtx[0].lane(i), vtx[1].lane(i), vtx[2].lane(i)))
     }
 }
 
@@ -83,7 +88,12 @@ pub struct HitLanes<L, const N: usize> {
 
 impl<L: Lane, const N: usize> Default for HitLanes<L, N> {
     fn default() -> Self {
-        Self { t: L::splat(f32::INFINITY), u: L::splat(0.0), v: L::splat(0.0), prim: [INVALID; N] }
+        Self {
+            t: L::splat(f32::INFINITY),
+            u: L::splat(0.0),
+            v: L::splat(0.0),
+            prim: [INVALID; N],
+        }
     }
 }
 
@@ -93,7 +103,12 @@ impl<L: Lane, const N: usize> HitLanes<L, N> {
         if self.prim[i] == INVALID {
             return Hit::NONE;
         }
-        Hit { t: self.t.lane(i), u: self.u.lane(i), v: self.v.lane(i), prim: self.prim[i] }
+        Hit {
+            t: self.t.lane(i),
+            u: self.u.lane(i),
+            v: self.v.lane(i),
+            prim: self.prim[i],
+        }
     }
 }
 
@@ -116,5 +131,10 @@ pub(crate) fn closest_lane<L: Lane>(mut mask: u32, t: L, u: L, v: L, prim: &[u32
             lane = i;
         }
     }
-    Some(Hit { t: best, u: u.lane(lane), v: v.lane(lane), prim: prim[lane] })
+    Some(Hit {
+        t: best,
+        u: u.lane(lane),
+        v: v.lane(lane),
+        prim: prim[lane],
+    })
 }

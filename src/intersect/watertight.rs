@@ -29,8 +29,14 @@ use crate::math::Lane;
 #[inline(never)]
 #[cold]
 fn edges_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (f32, f32, f32) {
-    let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-    ((cx * by - cy * bx) as f32, (ax * cy - ay * cx) as f32, (bx * ay - by * ax) as f32)
+    let (ax, ay, bx, by, cx, cy) = (
+        ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
+    );
+    (
+        (cx * by - cy * bx) as f32,
+        (ax * cy - ay * cx) as f32,
+        (bx * ay - by * ax) as f32,
+    )
 }
 
 /// Scalar reference: the hit of `ray` with `tri` (reported with `prim`), if any.
@@ -51,9 +57,9 @@ pub fn intersect_scalar(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<
     let [kx, ky, kz] = ray.k;
     let s = ray.shear;
     let o = ray.origin;
-    let a = tri[0] - o;
-    let b = tri[1] - o;
-    let c = tri[2] - o;
+    let a = (tri[0] - o).to_array();
+    let b = (tri[1] - o).to_array();
+    let c = (tri[2] - o).to_array();
     let (ax, ay) = (a[kx] - s.x * a[kz], a[ky] - s.y * a[kz]);
     let (bx, by) = (b[kx] - s.x * b[kz], b[ky] - s.y * b[kz]);
     let (cx, cy) = (c[kx] - s.x * c[kz], c[ky] - s.y * c[kz]);
@@ -74,7 +80,12 @@ pub fn intersect_scalar(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<
     let rcp = 1.0 / det;
     let t = big_t * rcp;
     // NaN fails both comparisons.
-    (t >= ray.tmin && t < ray.tmax).then_some(Hit { t, u: v * rcp, v: w * rcp, prim })
+    (t >= ray.tmin && t < ray.tmax).then_some(Hit {
+        t,
+        u: v * rcp,
+        v: w * rcp,
+        prim,
+    })
 }
 
 /// The test on lanes, from permuted origin-relative vertices `[A, B, C][kx, ky, kz]`. `relevant`
@@ -101,7 +112,8 @@ fn core<L: Lane>(p: [[L; 3]; 3], s: [L; 3], tmin: L, tmax: L, relevant: u32) -> 
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
-            (l[6][i], l[7][i], l[8][i]) = edges_f64(l[0][i], l[1][i], l[2][i], l[3][i], l[4][i], l[5][i]);
+            (l[6][i], l[7][i], l[8][i]) =
+                edges_f64(l[0][i], l[1][i], l[2][i], l[3][i], l[4][i], l[5][i]);
         }
         (u, v, w) = (L::load(&l[6]), L::load(&l[7]), L::load(&l[8]));
     }
@@ -117,7 +129,10 @@ fn core<L: Lane>(p: [[L; 3]; 3], s: [L; 3], tmin: L, tmax: L, relevant: u32) -> 
 
 /// One ray against `N` SoA triangles: `(mask of valid lanes hit, t, u, v)`.
 #[inline(always)]
-fn lanes_one_ray<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> (u32, L, L, L) {
+fn lanes_one_ray<L: Lane, const N: usize>(
+    ray: &PreparedRay,
+    tris: &TriangleLanes<L, N>,
+) -> (u32, L, L, L) {
     let o = ray.origin.to_array().map(L::splat);
     let p = tris.v.map(|vtx| ray.k.map(|k| vtx[k] - o[k]));
     let s = ray.shear.to_array().map(L::splat);
@@ -133,7 +148,10 @@ pub fn hit_mask<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes
 
 /// Closest hit of one ray among `N` SoA triangles (ties: lowest lane).
 #[inline(always)]
-pub fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit> {
+pub fn intersect_lanes<L: Lane, const N: usize>(
+    ray: &PreparedRay,
+    tris: &TriangleLanes<L, N>,
+) -> Option<Hit> {
     let (m, t, u, v) = lanes_one_ray(ray, tris);
     closest_lane(m, t, u, v, &tris.prim)
 }
@@ -191,7 +209,7 @@ pub fn occluded_x8(ray: &PreparedRay, tris: &TriangleX8) -> bool {
 /// let rays: Vec<Ray> = (0..8).map(|i| Ray::new(Vec3::new(i as f32 * 0.2, 0.0, 0.0), Vec3::Z)).collect();
 /// let mut packet = PreparedPacket8::new(&rays);
 /// let mut hits = HitLanes::default();
-/// assert_eq!(watertight::intersect_packet(&mut packet, &tri, 3, &mut hits), 0b0001_1111);
+/// assert_eq!(watertight::intersect_packet(&mut packet, &tri, 3, &mut hits), 0b0000_0111); // x = 0.0, 0.2, 0.4 hit
 /// ```
 #[inline]
 pub fn intersect_packet<L: Lane, const N: usize>(
@@ -211,7 +229,11 @@ pub fn intersect_packet<L: Lane, const N: usize>(
     let active = rays.active();
     let (m, t, u, v) = core(p, rays.shear, rays.tmin, rays.tmax, active);
     let hit = L::load(&core::array::from_fn::<f32, 8, _>(|i| {
-        if m >> i & 1 == 1 { f32::from_bits(u32::MAX) } else { 0.0 }
+        if m >> i & 1 == 1 {
+            f32::from_bits(u32::MAX)
+        } else {
+            0.0
+        }
     }));
     super::packet::commit(rays, hits, hit, t, u, v, prim)
 }

@@ -54,7 +54,10 @@ impl Mesh {
                 Some("v") => {
                     let mut c = [0.0f32; 3];
                     for slot in &mut c {
-                        *slot = it.next().and_then(|s| s.parse().ok()).ok_or(ObjError { line: line_no })?;
+                        *slot = it
+                            .next()
+                            .and_then(|s| s.parse().ok())
+                            .ok_or(ObjError { line: line_no })?;
                     }
                     m.positions.push(Vec3::from_array(c));
                 }
@@ -62,7 +65,11 @@ impl Mesh {
                     let mut poly = [0u32; 64];
                     let mut k = 0;
                     for tok in it {
-                        let idx: i64 = tok.split('/').next().and_then(|s| s.parse().ok()).ok_or(ObjError { line: line_no })?;
+                        let idx: i64 = tok
+                            .split('/')
+                            .next()
+                            .and_then(|s| s.parse().ok())
+                            .ok_or(ObjError { line: line_no })?;
                         let nv = m.positions.len() as i64;
                         let abs = if idx < 0 { nv + idx } else { idx - 1 };
                         if abs < 0 || abs >= nv || k == poly.len() {
@@ -139,14 +146,31 @@ pub fn icosphere(subdivisions: u32) -> Mesh {
     .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
     .collect();
     let mut indices: Vec<[u32; 3]> = alloc::vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..subdivisions {
         // Midpoints shared between the two triangles of an edge, keyed by the sorted vertex pair.
-        let mut mids: alloc::collections::BTreeMap<(u32, u32), u32> = alloc::collections::BTreeMap::new();
+        let mut mids: alloc::collections::BTreeMap<(u32, u32), u32> =
+            alloc::collections::BTreeMap::new();
         let mut mid = |a: u32, b: u32, pos: &mut Vec<Vec3>| -> u32 {
             *mids.entry((a.min(b), a.max(b))).or_insert_with(|| {
                 pos.push(((pos[a as usize] + pos[b as usize]) * 0.5).normalize());
@@ -226,4 +250,87 @@ impl Rng {
         let r = libm::sqrtf(1.0 - z * z);
         Vec3::new(r * libm::cosf(a), r * libm::sinf(a), z)
     }
+}
+
+/// Which features of a mesh [`aimed_rays`] aims at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Aim {
+    /// Points on shared edges: each edge's midpoint and one random point.
+    Edges,
+    /// The vertices themselves.
+    Vertices,
+}
+
+/// Rays aimed exactly at the edges or vertices of `mesh` (the hardest rays for a ray/triangle test:
+/// they must not slip between adjacent triangles).
+///
+/// Each target gets `per_target` rays from random origins outside the surface, within 60 degrees of
+/// the target's outward (area-weighted) normal, at 0.5 to 2 times `distance`. The target lies at
+/// `t = 1`, and each ray only accepts `t` in `[0.9, 1.1)`, so that on a closed mesh a ray that
+/// slips through a crack cannot be rescued by the far side.
+///
+/// ```
+/// use strahl::scene::{self, Aim};
+/// let m = scene::icosphere(1);
+/// let rays = scene::aimed_rays(&m, Aim::Vertices, 2, 3.0, 7);
+/// assert_eq!(rays.len(), 2 * m.positions.len());
+/// ```
+pub fn aimed_rays(
+    mesh: &Mesh,
+    aim: Aim,
+    per_target: usize,
+    distance: f32,
+    seed: u64,
+) -> Vec<crate::Ray> {
+    let mut rng = Rng::new(seed);
+    let pos = |i: u32| {
+        mesh.positions
+            .get(i as usize)
+            .copied()
+            .unwrap_or(Vec3::ZERO)
+    };
+    let mut normal = alloc::vec![Vec3::ZERO; mesh.positions.len()];
+    for &[a, b, c] in &mesh.indices {
+        let n = (pos(b) - pos(a)).cross(pos(c) - pos(a));
+        for i in [a, b, c] {
+            if let Some(slot) = normal.get_mut(i as usize) {
+                *slot += n;
+            }
+        }
+    }
+    let normal_of = |i: u32| normal.get(i as usize).copied().unwrap_or(Vec3::Z);
+    let mut targets: Vec<(Vec3, Vec3)> = Vec::new();
+    match aim {
+        Aim::Vertices => {
+            for i in 0..mesh.positions.len() as u32 {
+                targets.push((pos(i), normal_of(i).normalize_or(Vec3::Z)));
+            }
+        }
+        Aim::Edges => {
+            for &[a, b, c] in &mesh.indices {
+                for (i, j) in [(a, b), (b, c), (c, a)] {
+                    if i < j {
+                        let (pi, pj) = (pos(i), pos(j));
+                        let n = (normal_of(i) + normal_of(j)).normalize_or(Vec3::Z);
+                        targets.push((pi + (pj - pi) * 0.5, n));
+                        targets.push((pi + (pj - pi) * rng.f32(), n));
+                    }
+                }
+            }
+        }
+    }
+    let mut rays = Vec::with_capacity(targets.len() * per_target);
+    for (p, n) in targets {
+        for _ in 0..per_target {
+            let out = loop {
+                let v = rng.unit_vector();
+                if v.dot(n) > 0.5 {
+                    break v;
+                }
+            };
+            let origin = p + out * distance * rng.range(0.5, 2.0);
+            rays.push(crate::Ray::with_range(origin, p - origin, 0.9, 1.1));
+        }
+    }
+    rays
 }
