@@ -19,9 +19,7 @@
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::time::Duration;
-use strahl::intersect::{
-    AabbX4, AabbX8, PreparedRay, intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8,
-};
+use strahl::intersect::{AabbX4, AabbX8, PreparedRay, intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8};
 use strahl::{Aabb, Ray, Vec3};
 
 /// Rays per iteration.
@@ -87,11 +85,7 @@ fn scene() -> Scene {
     let boxes: Vec<Aabb> = (0..NODES * WIDTH)
         .map(|_| {
             let c = rng.unit();
-            let h = Vec3::new(
-                rng.range(0.25, 0.45),
-                rng.range(0.25, 0.45),
-                rng.range(0.25, 0.45),
-            );
+            let h = Vec3::new(rng.range(0.25, 0.45), rng.range(0.25, 0.45), rng.range(0.25, 0.45));
             Aabb::new(c - h, c + h)
         })
         .collect();
@@ -100,12 +94,7 @@ fn scene() -> Scene {
         .map(|n| [AabbX4::from_boxes(&n[..4]), AabbX4::from_boxes(&n[4..])])
         .collect();
     let x8 = boxes.chunks(WIDTH).map(AabbX8::from_boxes).collect();
-    Scene {
-        rays,
-        boxes,
-        x4,
-        x8,
-    }
+    Scene { rays, boxes, x4, x8 }
 }
 
 // The runners are `#[inline(never)]` so that `objdump -d` of the bench binary shows each one as a
@@ -150,8 +139,7 @@ fn run_x4(rays: &[PreparedRay], nodes: &[[AabbX4; 2]]) -> u32 {
     let mut hits = 0;
     for chunk in rays.chunks(NODES) {
         for (r, [lo, hi]) in chunk.iter().zip(nodes) {
-            hits +=
-                intersect_aabb_x4(r, lo).1.count_ones() + intersect_aabb_x4(r, hi).1.count_ones();
+            hits += intersect_aabb_x4(r, lo).1.count_ones() + intersect_aabb_x4(r, hi).1.count_ones();
         }
     }
     hits
@@ -193,12 +181,8 @@ fn ray_box(c: &mut Criterion) {
     g.bench_function("scalar_autovec", |b| {
         b.iter(|| run_scalar_autovec(black_box(&s.rays), black_box(&s.boxes)))
     });
-    g.bench_function("x4", |b| {
-        b.iter(|| run_x4(black_box(&s.rays), black_box(&s.x4)))
-    });
-    g.bench_function("x8", |b| {
-        b.iter(|| run_x8(black_box(&s.rays), black_box(&s.x8)))
-    });
+    g.bench_function("x4", |b| b.iter(|| run_x4(black_box(&s.rays), black_box(&s.x4))));
+    g.bench_function("x8", |b| b.iter(|| run_x8(black_box(&s.rays), black_box(&s.x8))));
     g.finish();
 }
 

@@ -22,15 +22,11 @@
 //! The group `occluded` compares the any-hit forms: `occluded_x8` against a scalar loop that
 //! stops at the first hit (so the scalar side may do fewer tests than counted).
 
-use criterion::{
-    BenchmarkGroup, Criterion, Throughput, criterion_group, criterion_main, measurement::WallTime,
-};
+use criterion::{BenchmarkGroup, Criterion, Throughput, criterion_group, criterion_main, measurement::WallTime};
 use std::hint::black_box;
 use std::time::Duration;
 use strahl::geometry::{INVALID, Triangle};
-use strahl::intersect::{
-    HitLanes, PreparedPacket8, PreparedRay, TriangleX4, TriangleX8, moller, watertight,
-};
+use strahl::intersect::{HitLanes, PreparedPacket8, PreparedRay, TriangleX4, TriangleX8, moller, watertight};
 use strahl::{Hit, Ray, Vec3};
 
 /// Rays per packet.
@@ -116,12 +112,7 @@ fn scene() -> Scene {
     let x4 = tris
         .chunks(WIDTH)
         .zip(prims.chunks(WIDTH))
-        .map(|(t, p)| {
-            [
-                TriangleX4::pack(&t[..4], &p[..4]),
-                TriangleX4::pack(&t[4..], &p[4..]),
-            ]
-        })
+        .map(|(t, p)| [TriangleX4::pack(&t[..4], &p[..4]), TriangleX4::pack(&t[4..], &p[4..])])
         .collect();
     let x8 = tris
         .chunks(WIDTH)
@@ -157,10 +148,7 @@ fn sum(h: Option<Hit>) -> u64 {
 }
 
 /// The ray batches and the leaf of each: packet `k` meets leaf `k % LEAVES`.
-fn batches<'a, L>(
-    rays: &'a [PreparedRay],
-    leaves: &'a [L],
-) -> impl Iterator<Item = (&'a [PreparedRay], &'a L)> {
+fn batches<'a, L>(rays: &'a [PreparedRay], leaves: &'a [L]) -> impl Iterator<Item = (&'a [PreparedRay], &'a L)> {
     rays.chunks(PACKET * LEAVES)
         .flat_map(move |c| c.chunks_exact(PACKET).zip(leaves))
 }
@@ -170,17 +158,10 @@ fn batches<'a, L>(
 
 /// Scalar reference: a leaf loop over the 8 triangles that shrinks `tmax` on each hit.
 #[inline(never)]
-fn run_scalar(
-    f: impl Fn(&PreparedRay, &Triangle, u32) -> Option<Hit>,
-    rays: &[PreparedRay],
-    tris: &[Triangle],
-) -> u64 {
+fn run_scalar(f: impl Fn(&PreparedRay, &Triangle, u32) -> Option<Hit>, rays: &[PreparedRay], tris: &[Triangle]) -> u64 {
     let mut acc = 0;
     for chunk in rays.chunks(PACKET * LEAVES) {
-        for (packet, (leaf, tri)) in chunk
-            .chunks_exact(PACKET)
-            .zip(tris.chunks_exact(WIDTH).enumerate())
-        {
+        for (packet, (leaf, tri)) in chunk.chunks_exact(PACKET).zip(tris.chunks_exact(WIDTH).enumerate()) {
             for ray in packet {
                 let mut r = *ray;
                 let mut best = None;
@@ -199,11 +180,7 @@ fn run_scalar(
 
 /// Two 4-wide calls per ray and leaf; ties go to the first call, as in the scalar loop.
 #[inline(never)]
-fn run_x4(
-    f: impl Fn(&PreparedRay, &TriangleX4) -> Option<Hit>,
-    rays: &[PreparedRay],
-    x4: &[[TriangleX4; 2]],
-) -> u64 {
+fn run_x4(f: impl Fn(&PreparedRay, &TriangleX4) -> Option<Hit>, rays: &[PreparedRay], x4: &[[TriangleX4; 2]]) -> u64 {
     let mut acc = 0;
     for (packet, [lo, hi]) in batches(rays, x4) {
         for r in packet {
@@ -219,11 +196,7 @@ fn run_x4(
 
 /// One 8-wide call per ray and leaf.
 #[inline(never)]
-fn run_x8(
-    f: impl Fn(&PreparedRay, &TriangleX8) -> Option<Hit>,
-    rays: &[PreparedRay],
-    x8: &[TriangleX8],
-) -> u64 {
+fn run_x8(f: impl Fn(&PreparedRay, &TriangleX8) -> Option<Hit>, rays: &[PreparedRay], x8: &[TriangleX8]) -> u64 {
     let mut acc = 0;
     for (packet, leaf) in batches(rays, x8) {
         for r in packet {
@@ -278,11 +251,7 @@ fn run_occluded_scalar(
 
 /// Any-hit, one 8-wide call per ray and leaf.
 #[inline(never)]
-fn run_occluded_x8(
-    f: impl Fn(&PreparedRay, &TriangleX8) -> bool,
-    rays: &[PreparedRay],
-    x8: &[TriangleX8],
-) -> u32 {
+fn run_occluded_x8(f: impl Fn(&PreparedRay, &TriangleX8) -> bool, rays: &[PreparedRay], x8: &[TriangleX8]) -> u32 {
     let mut n = 0;
     for (packet, leaf) in batches(rays, x8) {
         for r in packet {
@@ -326,20 +295,11 @@ fn closest(c: &mut Criterion) {
     let want = run_scalar(moller::intersect_scalar, &s.rays, &s.tris);
     assert_eq!(want, run_x4(moller::intersect_x4, &s.rays, &s.x4));
     assert_eq!(want, run_x8(moller::intersect_x8, &s.rays, &s.x8));
-    assert_eq!(
-        want,
-        run_packet8(moller::intersect_packet, &s.packets, &s.tris)
-    );
+    assert_eq!(want, run_packet8(moller::intersect_packet, &s.packets, &s.tris));
     let mut g = c.benchmark_group("moller");
     configure(&mut g);
     g.bench_function("scalar", |b| {
-        b.iter(|| {
-            run_scalar(
-                moller::intersect_scalar,
-                black_box(&s.rays),
-                black_box(&s.tris),
-            )
-        })
+        b.iter(|| run_scalar(moller::intersect_scalar, black_box(&s.rays), black_box(&s.tris)))
     });
     g.bench_function("x4", |b| {
         b.iter(|| run_x4(moller::intersect_x4, black_box(&s.rays), black_box(&s.x4)))
@@ -348,13 +308,7 @@ fn closest(c: &mut Criterion) {
         b.iter(|| run_x8(moller::intersect_x8, black_box(&s.rays), black_box(&s.x8)))
     });
     g.bench_function("packet8", |b| {
-        b.iter(|| {
-            run_packet8(
-                moller::intersect_packet,
-                black_box(&s.packets),
-                black_box(&s.tris),
-            )
-        })
+        b.iter(|| run_packet8(moller::intersect_packet, black_box(&s.packets), black_box(&s.tris)))
     });
     g.finish();
 
@@ -362,47 +316,20 @@ fn closest(c: &mut Criterion) {
     let want = run_scalar(watertight::intersect_scalar, &s.rays, &s.tris);
     assert_eq!(want, run_x4(watertight::intersect_x4, &s.rays, &s.x4));
     assert_eq!(want, run_x8(watertight::intersect_x8, &s.rays, &s.x8));
-    assert_eq!(
-        want,
-        run_packet8(watertight::intersect_packet, &s.packets, &s.tris)
-    );
+    assert_eq!(want, run_packet8(watertight::intersect_packet, &s.packets, &s.tris));
     let mut g = c.benchmark_group("watertight");
     configure(&mut g);
     g.bench_function("scalar", |b| {
-        b.iter(|| {
-            run_scalar(
-                watertight::intersect_scalar,
-                black_box(&s.rays),
-                black_box(&s.tris),
-            )
-        })
+        b.iter(|| run_scalar(watertight::intersect_scalar, black_box(&s.rays), black_box(&s.tris)))
     });
     g.bench_function("x4", |b| {
-        b.iter(|| {
-            run_x4(
-                watertight::intersect_x4,
-                black_box(&s.rays),
-                black_box(&s.x4),
-            )
-        })
+        b.iter(|| run_x4(watertight::intersect_x4, black_box(&s.rays), black_box(&s.x4)))
     });
     g.bench_function("x8", |b| {
-        b.iter(|| {
-            run_x8(
-                watertight::intersect_x8,
-                black_box(&s.rays),
-                black_box(&s.x8),
-            )
-        })
+        b.iter(|| run_x8(watertight::intersect_x8, black_box(&s.rays), black_box(&s.x8)))
     });
     g.bench_function("packet8", |b| {
-        b.iter(|| {
-            run_packet8(
-                watertight::intersect_packet,
-                black_box(&s.packets),
-                black_box(&s.tris),
-            )
-        })
+        b.iter(|| run_packet8(watertight::intersect_packet, black_box(&s.packets), black_box(&s.tris)))
     });
     g.finish();
 }
@@ -412,42 +339,21 @@ fn occluded(c: &mut Criterion) {
     let want = run_occluded_scalar(moller::intersect_scalar, &s.rays, &s.tris);
     assert_eq!(want, run_occluded_x8(moller::occluded_x8, &s.rays, &s.x8));
     let want = run_occluded_scalar(watertight::intersect_scalar, &s.rays, &s.tris);
-    assert_eq!(
-        want,
-        run_occluded_x8(watertight::occluded_x8, &s.rays, &s.x8)
-    );
+    assert_eq!(want, run_occluded_x8(watertight::occluded_x8, &s.rays, &s.x8));
 
     let mut g = c.benchmark_group("occluded");
     configure(&mut g);
     g.bench_function("moller_scalar", |b| {
-        b.iter(|| {
-            run_occluded_scalar(
-                moller::intersect_scalar,
-                black_box(&s.rays),
-                black_box(&s.tris),
-            )
-        })
+        b.iter(|| run_occluded_scalar(moller::intersect_scalar, black_box(&s.rays), black_box(&s.tris)))
     });
     g.bench_function("moller_x8", |b| {
         b.iter(|| run_occluded_x8(moller::occluded_x8, black_box(&s.rays), black_box(&s.x8)))
     });
     g.bench_function("watertight_scalar", |b| {
-        b.iter(|| {
-            run_occluded_scalar(
-                watertight::intersect_scalar,
-                black_box(&s.rays),
-                black_box(&s.tris),
-            )
-        })
+        b.iter(|| run_occluded_scalar(watertight::intersect_scalar, black_box(&s.rays), black_box(&s.tris)))
     });
     g.bench_function("watertight_x8", |b| {
-        b.iter(|| {
-            run_occluded_x8(
-                watertight::occluded_x8,
-                black_box(&s.rays),
-                black_box(&s.x8),
-            )
-        })
+        b.iter(|| run_occluded_x8(watertight::occluded_x8, black_box(&s.rays), black_box(&s.x8)))
     });
     g.finish();
 }

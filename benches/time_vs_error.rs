@@ -25,9 +25,7 @@ fn setup() -> (Vec<Triangle>, Vec<TriangleX8>, Vec<PreparedRay>) {
     let packed = tris
         .chunks(8)
         .enumerate()
-        .map(|(c, ch)| {
-            TriangleX8::pack(ch, &(0..8).map(|i| (c * 8 + i) as u32).collect::<Vec<_>>())
-        })
+        .map(|(c, ch)| TriangleX8::pack(ch, &(0..8).map(|i| (c * 8 + i) as u32).collect::<Vec<_>>()))
         .collect();
     (tris, packed, rays.iter().map(PreparedRay::new).collect())
 }
@@ -75,12 +73,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             timed
                 .iter()
-                .map(|r| {
-                    packed
-                        .iter()
-                        .filter(|p| moller::intersect_x8(r, p).is_some())
-                        .count()
-                })
+                .map(|r| packed.iter().filter(|p| moller::intersect_x8(r, p).is_some()).count())
                 .sum::<usize>()
         })
     });

@@ -9,8 +9,8 @@ use std::hint::black_box;
 use std::time::Instant;
 use strahl::geometry::{Triangle, morton};
 use strahl::intersect::{
-    AabbX4, AabbX8, PreparedRay, TriangleX4, TriangleX8, intersect_aabb_scalar, intersect_aabb_x4,
-    intersect_aabb_x8, moller, watertight,
+    AabbX4, AabbX8, PreparedRay, TriangleX4, TriangleX8, intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8,
+    moller, watertight,
 };
 use strahl::scene::{self, Aim, Rng};
 use strahl::{Aabb, Vec3};
@@ -54,11 +54,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let rays: Vec<PreparedRay> = (0..4096)
         .map(|_| {
             let o = Vec3::new(rng.range(-2.0, 2.0), rng.range(-2.0, 2.0), -3.0);
-            let target = Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            );
+            let target = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
             PreparedRay::new(&strahl::Ray::new(o, target - o))
         })
         .collect();
@@ -66,30 +62,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("\n[1/3] ray/box slab test: 4096 rays x 8 boxes");
     let boxes: Vec<Aabb> = (0..8)
         .map(|_| {
-            let c = Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            );
+            let c = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
             Aabb::new(c - Vec3::splat(0.4), c + Vec3::splat(0.4))
         })
         .collect();
     let (b4, b8) = (
-        [
-            AabbX4::from_boxes(&boxes[..4]),
-            AabbX4::from_boxes(&boxes[4..]),
-        ],
+        [AabbX4::from_boxes(&boxes[..4]), AabbX4::from_boxes(&boxes[4..])],
         AabbX8::from_boxes(&boxes),
     );
     let work = rays.len() * 8;
     let s = ns_per(work, 9, || {
         rays.iter()
-            .map(|r| {
-                boxes
-                    .iter()
-                    .filter(|b| intersect_aabb_scalar(r, b).is_some())
-                    .count() as u64
-            })
+            .map(|r| boxes.iter().filter(|b| intersect_aabb_scalar(r, b).is_some()).count() as u64)
             .sum()
     });
     let x4 = ns_per(work, 9, || {
@@ -128,11 +112,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("\n[2/3] ray/triangle: 4096 rays x 8 triangles");
     let tris: Vec<Triangle> = (0..8)
         .map(|_| {
-            let c = Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            );
+            let c = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
             [0, 1, 2].map(|_| c + rng.unit_vector() * 0.8)
         })
         .collect();
@@ -173,16 +153,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .map(|r| t4.iter().filter(|t| f4(r, t).is_some()).count() as u64)
                 .sum()
         });
-        let x8 = ns_per(work, 9, || {
-            rays.iter().filter(|r| f8(r, &t8).is_some()).count() as u64
-        });
+        let x8 = ns_per(work, 9, || rays.iter().filter(|r| f8(r, &t8).is_some()).count() as u64);
         row(name, &[s, x4, x8]);
         per_test.push((name, s, x8));
     }
 
-    println!(
-        "\n[3/3] time against error: rays aimed exactly at edges and vertices of a closed icosphere"
-    );
+    println!("\n[3/3] time against error: rays aimed exactly at edges and vertices of a closed icosphere");
     let mut m = scene::icosphere(3);
     for p in &mut m.positions {
         *p = *p * 3.7 + Vec3::new(0.31, -1.7, 2.1);
@@ -212,15 +188,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
 
     let codes = 1 << 20;
-    let pts: Vec<Vec3> = (0..codes)
-        .map(|_| Vec3::new(rng.f32(), rng.f32(), rng.f32()))
-        .collect();
+    let pts: Vec<Vec3> = (0..codes).map(|_| Vec3::new(rng.f32(), rng.f32(), rng.f32())).collect();
     let q = morton::MortonQuantizer::new30(&Aabb::new(Vec3::ZERO, Vec3::ONE));
     let mut out = vec![0u32; codes];
     let ms = ns_per(codes, 9, || {
-        pts.iter()
-            .map(|p| morton::morton30_scalar(*p, &q) as u64)
-            .sum()
+        pts.iter().map(|p| morton::morton30_scalar(*p, &q) as u64).sum()
     });
     let mx = ns_per(codes, 9, || {
         morton::morton30_slice(&pts, &q, &mut out);
@@ -264,11 +236,7 @@ fn plot(path: &str, points: &[(&str, f64, f64, f64)]) -> Result<(), Box<dyn std:
         let c = colors[i % 2];
         for (w, x) in [("scalar", s), ("x8", x8)] {
             chart
-                .draw_series(std::iter::once(Circle::new(
-                    (*x, rate * 100.0),
-                    5,
-                    c.filled(),
-                )))?
+                .draw_series(std::iter::once(Circle::new((*x, rate * 100.0), 5, c.filled())))?
                 .label(format!("{name} {w}"))
                 .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
             chart.draw_series(std::iter::once(Text::new(

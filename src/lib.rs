@@ -38,7 +38,7 @@
 //! ## Where the tunables live
 //! | stage | knob | where |
 //! |---|---|---|
-//! | slab test | conservative far-bound scale `1 + 2 gamma(3)` | [`intersect::aabb::FAR_SCALE`] |
+//! | slab test | conservative far bound `far + \|far\| 2 gamma(3)` | [`intersect::aabb::FAR_SLACK`] |
 //! | Morton codes | bits per axis (10 or 21), quantisation bounds | [`geometry::morton::MortonQuantizer`] |
 //! | SIMD width | `wide` picks AVX / SSE / NEON from target features | build with `-C target-cpu=native` |
 //!

@@ -9,8 +9,8 @@ mod common;
 use common::{bounded, grid, raw, vec3};
 use proptest::prelude::*;
 use strahl::intersect::{
-    AabbX4, AabbX8, HitLanes, PreparedPacket4, PreparedPacket8, PreparedRay, TriangleX4,
-    TriangleX8, intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8, moller, watertight,
+    AabbX4, AabbX8, HitLanes, PreparedPacket4, PreparedPacket8, PreparedRay, TriangleX4, TriangleX8,
+    intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8, moller, watertight,
 };
 use strahl::{Aabb, Hit, Ray, Vec3, geometry::Triangle};
 
@@ -80,12 +80,7 @@ fn check_triangles(ray: &Ray, tris: &[Triangle; 8]) -> Result<(), TestCaseError>
             name,
             i4
         );
-        prop_assert!(
-            same_hit(i8, scalar_closest(f, &pre, tris)),
-            "{} x8 {:?}",
-            name,
-            i8
-        );
+        prop_assert!(same_hit(i8, scalar_closest(f, &pre, tris)), "{} x8 {:?}", name, i8);
         if let Some(h) = i8 {
             prop_assert!(h.t >= pre.tmin && h.t < pre.tmax, "t outside [tmin, tmax)");
         }
@@ -156,10 +151,7 @@ fn check_boxes(ray: &Ray, boxes: &[Aabb; 8]) -> Result<(), TestCaseError> {
 
 /// A ray from a random origin towards a random point of triangle `k` (so hits are common), or in a
 /// random direction; random `[tmin, tmax)`.
-fn ray_towards<S: Strategy<Value = f32> + Clone + 'static>(
-    s: S,
-    tris: [Triangle; 8],
-) -> impl Strategy<Value = Ray> {
+fn ray_towards<S: Strategy<Value = f32> + Clone + 'static>(s: S, tris: [Triangle; 8]) -> impl Strategy<Value = Ray> {
     (
         vec3(s.clone()),
         vec3(s),
@@ -170,11 +162,7 @@ fn ray_towards<S: Strategy<Value = f32> + Clone + 'static>(
         0u8..4,
     )
         .prop_map(move |(o, d, k, a, b, aim, range)| {
-            let (a, b) = if a + b > 1.0 {
-                (1.0 - a, 1.0 - b)
-            } else {
-                (a, b)
-            };
+            let (a, b) = if a + b > 1.0 { (1.0 - a, 1.0 - b) } else { (a, b) };
             let tri = tris[k];
             let target = tri[0] + (tri[1] - tri[0]) * a + (tri[2] - tri[0]) * b;
             let dir = if aim { target - o } else { d };
@@ -188,29 +176,23 @@ fn ray_towards<S: Strategy<Value = f32> + Clone + 'static>(
         })
 }
 
-fn scene<S: Strategy<Value = f32> + Clone + 'static>(
-    s: S,
-) -> impl Strategy<Value = (Ray, [Triangle; 8])> {
+fn scene<S: Strategy<Value = f32> + Clone + 'static>(s: S) -> impl Strategy<Value = (Ray, [Triangle; 8])> {
     let tri = (vec3(s.clone()), vec3(s.clone()), vec3(s.clone())).prop_map(|(a, b, c)| [a, b, c]);
-    proptest::array::uniform8(tri)
-        .prop_flat_map(move |tris| (ray_towards(s.clone(), tris), Just(tris)))
+    proptest::array::uniform8(tri).prop_flat_map(move |tris| (ray_towards(s.clone(), tris), Just(tris)))
 }
 
 fn raw_ray() -> impl Strategy<Value = Ray> {
-    (vec3(raw()), vec3(raw()), raw(), raw())
-        .prop_map(|(o, d, t0, t1)| Ray::with_range(o, d, t0, t1))
+    (vec3(raw()), vec3(raw()), raw(), raw()).prop_map(|(o, d, t0, t1)| Ray::with_range(o, d, t0, t1))
 }
 
 fn boxes<S: Strategy<Value = f32> + Clone + 'static>(s: S) -> impl Strategy<Value = [Aabb; 8]> {
-    proptest::array::uniform8((vec3(s.clone()), vec3(s), any::<bool>()).prop_map(
-        |(a, b, sorted)| {
-            if sorted {
-                Aabb::new(a.min(b), a.max(b))
-            } else {
-                Aabb::new(a, b)
-            }
-        },
-    ))
+    proptest::array::uniform8((vec3(s.clone()), vec3(s), any::<bool>()).prop_map(|(a, b, sorted)| {
+        if sorted {
+            Aabb::new(a.min(b), a.max(b))
+        } else {
+            Aabb::new(a, b)
+        }
+    }))
 }
 
 proptest! {
@@ -319,10 +301,7 @@ fn boxes_grid_against_exact() {
         let b = Aabb::new(to(lo), to(hi));
         let got = intersect_aabb_scalar(&ray, &b).is_some();
         // Conservative: never a false miss. A false hit may only happen within rounding of a touch.
-        assert!(
-            !exact || got,
-            "false miss: o {o:?} d {d:?} box {lo:?}..{hi:?}"
-        );
+        assert!(!exact || got, "false miss: o {o:?} d {d:?} box {lo:?}..{hi:?}");
         if got && !exact {
             // The exact near/far gap must be tiny relative to the distances.
             let gap = tn_num as f64 / tn_den as f64 - tf_num as f64 / tf_den as f64;

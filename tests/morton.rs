@@ -80,29 +80,16 @@ fn check_order(p: Vec3, axis: usize, a: f32, b: f32, bounds: &Aabb) -> Result<()
     let (mut p0, mut p1) = (p, p);
     p0[axis] = lo;
     p1[axis] = hi;
-    for q in [
-        MortonQuantizer::new30(bounds),
-        MortonQuantizer::new63(bounds),
-    ] {
+    for q in [MortonQuantizer::new30(bounds), MortonQuantizer::new63(bounds)] {
         let (c0, c1) = (q.quantize_scalar(p0), q.quantize_scalar(p1));
-        prop_assert!(
-            c0[axis] <= c1[axis],
-            "{:?} {:?} -> {:?} {:?}",
-            p0,
-            p1,
-            c0,
-            c1
-        );
+        prop_assert!(c0[axis] <= c1[axis], "{:?} {:?} -> {:?} {:?}", p0, p1, c0, c1);
         for k in 0..3 {
             if k != axis {
                 prop_assert_eq!(c0[k], c1[k]);
             }
         }
     }
-    let (q30, q63) = (
-        MortonQuantizer::new30(bounds),
-        MortonQuantizer::new63(bounds),
-    );
+    let (q30, q63) = (MortonQuantizer::new30(bounds), MortonQuantizer::new63(bounds));
     prop_assert!(morton30_scalar(p0, &q30) <= morton30_scalar(p1, &q30));
     prop_assert!(morton63_scalar(p0, &q63) <= morton63_scalar(p1, &q63));
     Ok(())

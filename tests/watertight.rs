@@ -22,23 +22,15 @@ struct Counts {
     mt_x8_miss: usize,
 }
 
-fn any_hit(
-    f: fn(&PreparedRay, &Triangle, u32) -> Option<strahl::Hit>,
-    r: &PreparedRay,
-    tris: &[Triangle],
-) -> bool {
-    tris.iter()
-        .enumerate()
-        .any(|(i, t)| f(r, t, i as u32).is_some())
+fn any_hit(f: fn(&PreparedRay, &Triangle, u32) -> Option<strahl::Hit>, r: &PreparedRay, tris: &[Triangle]) -> bool {
+    tris.iter().enumerate().any(|(i, t)| f(r, t, i as u32).is_some())
 }
 
 fn run(tris: &[Triangle], rays: &[Ray]) -> Counts {
     let packed: Vec<TriangleX8> = tris
         .chunks(8)
         .enumerate()
-        .map(|(c, ch)| {
-            TriangleX8::pack(ch, &(0..8).map(|i| (c * 8 + i) as u32).collect::<Vec<_>>())
-        })
+        .map(|(c, ch)| TriangleX8::pack(ch, &(0..8).map(|i| (c * 8 + i) as u32).collect::<Vec<_>>()))
         .collect();
     let mut c = Counts {
         rays: rays.len(),
@@ -59,10 +51,7 @@ fn run(tris: &[Triangle], rays: &[Ray]) -> Counts {
 
 /// Aims rays at the `aim` features of `targets` and tests them against `mesh`.
 fn check(name: &str, mesh: &Mesh, targets: &Mesh, aim: Aim, per_target: usize, seed: u64) {
-    let c = run(
-        &mesh.to_soup(),
-        &scene::aimed_rays(targets, aim, per_target, 3.0, seed),
-    );
+    let c = run(&mesh.to_soup(), &scene::aimed_rays(targets, aim, per_target, 3.0, seed));
     println!(
         "{name} {aim:?}: {} rays; watertight misses scalar {} x8 {}; Möller-Trumbore misses scalar {} ({:.3}%) x8 {}",
         c.rays,
@@ -73,10 +62,7 @@ fn check(name: &str, mesh: &Mesh, targets: &Mesh, aim: Aim, per_target: usize, s
         c.mt_x8_miss
     );
     assert_eq!(c.wt_miss, 0, "{name}: the watertight test let rays through");
-    assert_eq!(
-        c.wt_x8_miss, 0,
-        "{name}: the x8 watertight test let rays through"
-    );
+    assert_eq!(c.wt_x8_miss, 0, "{name}: the x8 watertight test let rays through");
     assert_eq!(
         c.mt_miss, c.mt_x8_miss,
         "{name}: Möller-Trumbore x8 and scalar disagree"

@@ -603,9 +603,10 @@ pub fn check_grid_triangles(ray: &Ray, tris: &[Triangle; 8], scalar: &[[Option<H
 /// Grid inputs: the slab test is a conservative superset of the exact test (never a false miss),
 /// and a false hit is within rounding of touching (`near - far <= 1e-5 max(|near|, |far|)`).
 ///
-/// Unless `strict`, one open issue is tolerated (see [`KNOWN_ISSUES`]): a false miss where the
-/// exact interval is (nearly) a single point at negative `t`.
-pub fn check_grid_boxes(ray: &Ray, boxes: &[Aabb; 8], scalar: &[Option<f32>; 8], strict: bool) {
+/// Fuzzing found one false miss here (fixed): with `tmin < 0`, a box touched at a single negative
+/// `t` was missed because the far distance was scaled by `1 + 2 gamma(3)`, which moves a negative
+/// far distance inwards. Reproducers: `seeds/kernels/crash-box-*-negative-t`.
+pub fn check_grid_boxes(ray: &Ray, boxes: &[Aabb; 8], scalar: &[Option<f32>; 8]) {
     for (i, (b, got)) in boxes.iter().zip(scalar).enumerate() {
         let Some((exact, near_far)) = expect_box(ray, b) else {
             continue;
@@ -617,11 +618,7 @@ pub fn check_grid_boxes(ray: &Ray, boxes: &[Aabb; 8], scalar: &[Option<f32>; 8],
                 b
             )
         };
-        if exact && got.is_none() {
-            // KNOWN ISSUE 1: `near <= far * (1 + 2 gamma(3))` shrinks the interval when far < 0.
-            let known = near_far.is_some_and(|(near, far)| far < 0.0 && far - near <= 1e-5 * far.abs());
-            assert!(known && !strict, "false miss: {}", ctx());
-        }
+        assert!(!(exact && got.is_none()), "false miss: {}", ctx());
         if got.is_some() && !exact {
             let ok = near_far.is_some_and(|(near, far)| near - far <= 1e-5 * near.abs().max(far.abs()));
             assert!(ok, "false hit: {}", ctx());
@@ -629,31 +626,9 @@ pub fn check_grid_boxes(ray: &Ray, boxes: &[Aabb; 8], scalar: &[Option<f32>; 8],
     }
 }
 
-/// Open kernel issues that [`check_kernels`] tolerates unless `STRAHL_FUZZ_STRICT=1` is set, so
-/// that fuzzing keeps looking for new ones; each has a `seeds/kernels/crash-*` reproducer that
-/// `cargo test -- --ignored` replays strictly. Remove an entry (and its exemption) once fixed.
-///
-/// 1. Slab test, rays with `tmin < 0`: a box touched at a single negative `t` (a flat box crossed
-///    behind the origin, or an edge or corner grazed there) is missed, because the far distance is
-///    scaled by `1 + 2 gamma(3)`, which moves a negative far distance *down*.
-///    Reproducers: `crash-box-flat-negative-t`, `crash-box-touch-negative-t`.
-pub const KNOWN_ISSUES: &[&str] = &["slab test misses boxes touched at a single negative t"];
-
-/// `true` if `STRAHL_FUZZ_STRICT` is set to anything but `0`: [`KNOWN_ISSUES`] then fail too.
-pub fn strict() -> bool {
-    static STRICT: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *STRICT.get_or_init(|| std::env::var("STRAHL_FUZZ_STRICT").is_ok_and(|v| v != "0"))
-}
-
 /// Everything for one decoded `kernels` input: triangles, boxes and hits-in-boxes for every packet
-/// lane's ray, the packet kernels, and in grid mode the exact references. Tolerates
-/// [`KNOWN_ISSUES`] unless [`strict`].
+/// lane's ray, the packet kernels, and in grid mode the exact references.
 pub fn check_kernels(case: &KernelCase) {
-    check_kernels_with(case, strict());
-}
-
-/// [`check_kernels`] with the strictness given.
-pub fn check_kernels_with(case: &KernelCase, strict: bool) {
     for (i, ray) in case.packet.iter().enumerate() {
         // Lanes equal to an earlier one add nothing.
         if case.packet[..i].iter().any(|r| same_ray(r, ray)) {
@@ -664,7 +639,7 @@ pub fn check_kernels_with(case: &KernelCase, strict: bool) {
         check_hits_in_boxes(ray, &case.tris, &hits);
         if case.mode == Mode::Grid {
             check_grid_triangles(ray, &case.tris, &hits);
-            check_grid_boxes(ray, &case.boxes, &boxes, strict);
+            check_grid_boxes(ray, &case.boxes, &boxes);
         }
     }
     check_packet(&case.packet, &case.tris);

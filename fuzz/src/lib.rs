@@ -24,5 +24,5 @@ pub mod check;
 pub mod decode;
 pub mod exact;
 
-pub use check::{KNOWN_ISSUES, Kernel, brute_force_closest, check_kernels, check_kernels_with, same_hit, strict};
+pub use check::{Kernel, brute_force_closest, check_kernels, same_hit};
 pub use decode::{Input, KernelCase, Mode};

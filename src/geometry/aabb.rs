@@ -75,16 +75,8 @@ impl Aabb {
     #[inline]
     pub fn grow(&mut self, p: Vec3) {
         // min_l / max_l return their second operand when the first is NaN.
-        self.min = Vec3::new(
-            min_l(p.x, self.min.x),
-            min_l(p.y, self.min.y),
-            min_l(p.z, self.min.z),
-        );
-        self.max = Vec3::new(
-            max_l(p.x, self.max.x),
-            max_l(p.y, self.max.y),
-            max_l(p.z, self.max.z),
-        );
+        self.min = Vec3::new(min_l(p.x, self.min.x), min_l(p.y, self.min.y), min_l(p.z, self.min.z));
+        self.max = Vec3::new(max_l(p.x, self.max.x), max_l(p.y, self.max.y), max_l(p.z, self.max.z));
     }
 
     /// Extends the box to contain `other`.
@@ -205,13 +197,7 @@ mod tests {
     #[test]
     fn longest_axis_ties_go_low() {
         assert_eq!(Aabb::new(Vec3::ZERO, Vec3::ONE).longest_axis(), 0);
-        assert_eq!(
-            Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 2.0)).longest_axis(),
-            1
-        );
-        assert_eq!(
-            Aabb::new(Vec3::ZERO, Vec3::new(1.0, 1.0, 2.0)).longest_axis(),
-            2
-        );
+        assert_eq!(Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 2.0)).longest_axis(), 1);
+        assert_eq!(Aabb::new(Vec3::ZERO, Vec3::new(1.0, 1.0, 2.0)).longest_axis(), 2);
     }
 }

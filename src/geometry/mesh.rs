@@ -50,10 +50,7 @@ impl core::fmt::Display for GeometryError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             Self::BadLength { what, len, element } => {
-                write!(
-                    f,
-                    "{what}: {len} bytes is not a multiple of the {element}-byte element"
-                )
+                write!(f, "{what}: {len} bytes is not a multiple of the {element}-byte element")
             }
             Self::Misaligned { what } => write!(f, "{what}: buffer is not 4-byte aligned"),
         }
@@ -62,14 +59,9 @@ impl core::fmt::Display for GeometryError {
 
 impl core::error::Error for GeometryError {}
 
-fn cast<'a, T: bytemuck::Pod>(
-    what: &'static str,
-    bytes: &'a [u8],
-) -> Result<&'a [T], GeometryError> {
+fn cast<'a, T: bytemuck::Pod>(what: &'static str, bytes: &'a [u8]) -> Result<&'a [T], GeometryError> {
     bytemuck::try_cast_slice(bytes).map_err(|e| match e {
-        PodCastError::TargetAlignmentGreaterAndInputNotAligned => {
-            GeometryError::Misaligned { what }
-        }
+        PodCastError::TargetAlignmentGreaterAndInputNotAligned => GeometryError::Misaligned { what },
         _ => GeometryError::BadLength {
             what,
             len: bytes.len(),
@@ -143,11 +135,7 @@ impl Triangles for IndexedMesh<'_> {
     fn triangle(&self, i: usize) -> Option<Triangle> {
         let [a, b, c] = *self.indices.get(i)?;
         let p = self.positions;
-        Some([
-            *p.get(a as usize)?,
-            *p.get(b as usize)?,
-            *p.get(c as usize)?,
-        ])
+        Some([*p.get(a as usize)?, *p.get(b as usize)?, *p.get(c as usize)?])
     }
 }
 

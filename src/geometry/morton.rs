@@ -574,8 +574,7 @@ pub fn morton63_x8(x: f32x8, y: f32x8, z: f32x8, q: &MortonQuantizer) -> [u64; 8
     // so the low word interleaves y and z with 11 bits (their bit 10 lands on 31 and 30) and x
     // with 10, and the high word x with 11 bits from bit 10 on and y, z with 10 bits from bit 11.
     let lo = spread_x8::<10, 2>(cx) | spread_x8::<11, 1>(cy) | spread_x8::<11, 0>(cz);
-    let hi =
-        spread_x8::<11, 0>(cx >> 10) | spread_x8::<10, 2>(cy >> 11) | spread_x8::<10, 1>(cz >> 11);
+    let hi = spread_x8::<11, 0>(cx >> 10) | spread_x8::<10, 2>(cy >> 11) | spread_x8::<10, 1>(cz >> 11);
     // Zip the words into u64 lanes: [lo0, hi0, lo1, hi1, ...] in memory is lo | hi << 32 on a
     // little-endian target, [hi0, lo0, ...] on a big-endian one.
     let (a, b) = if cfg!(target_endian = "little") {
@@ -621,9 +620,7 @@ fn transpose8_permute(p: &[f32; 24]) -> [f32x8; 3] {
     const B: [u32; 8] = [0, ON, 0, 0, ON, 0, 0, ON];
     const C: [u32; 8] = [0, 0, ON, 0, 0, ON, 0, 0];
     // `from1`/`from2`: lanes taken from v1/v2, the rest from v0.
-    let pick = |from1: [u32; 8], from2: [u32; 8]| {
-        u32x8::new(from2).select(v2, u32x8::new(from1).select(v1, v0))
-    };
+    let pick = |from1: [u32; 8], from2: [u32; 8]| u32x8::new(from2).select(v2, u32x8::new(from1).select(v1, v0));
     // x: [x0 x3 x6 x1 x4 x7 x2 x5], y: [y5 y0 y3 y6 y1 y4 y7 y2], z: [z2 z5 z0 z3 z6 z1 z4 z7]
     let x = pick(B, C).shuffle(u32x8::new([0, 3, 6, 1, 4, 7, 2, 5]));
     let y = pick(C, A).shuffle(u32x8::new([1, 4, 7, 2, 5, 0, 3, 6]));
@@ -702,13 +699,7 @@ pub fn morton63_slice(points: &[Vec3], q: &MortonQuantizer, out: &mut [u64]) {
 /// assert_eq!(codes[2], MORTON30_MAX);
 /// assert_eq!(codes[9], u32::MAX); // untouched
 /// ```
-pub fn morton30_slice_soa(
-    xs: &[f32],
-    ys: &[f32],
-    zs: &[f32],
-    q: &MortonQuantizer,
-    out: &mut [u32],
-) {
+pub fn morton30_slice_soa(xs: &[f32], ys: &[f32], zs: &[f32], q: &MortonQuantizer, out: &mut [u32]) {
     let n = xs.len().min(ys.len()).min(zs.len()).min(out.len());
     let (xs, ys, zs, out) = (&xs[..n], &ys[..n], &zs[..n], &mut out[..n]);
     let (x8, _) = xs.as_chunks::<8>();
@@ -736,13 +727,7 @@ pub fn morton30_slice_soa(
 /// assert_eq!((codes[0], codes[2]), (0, MORTON63_MAX));
 /// assert_eq!(codes[8], morton63_scalar(Vec3::splat(0.9), &q)); // the scalar remainder
 /// ```
-pub fn morton63_slice_soa(
-    xs: &[f32],
-    ys: &[f32],
-    zs: &[f32],
-    q: &MortonQuantizer,
-    out: &mut [u64],
-) {
+pub fn morton63_slice_soa(xs: &[f32], ys: &[f32], zs: &[f32], q: &MortonQuantizer, out: &mut [u64]) {
     let n = xs.len().min(ys.len()).min(zs.len()).min(out.len());
     let (xs, ys, zs, out) = (&xs[..n], &ys[..n], &zs[..n], &mut out[..n]);
     let (x8, _) = xs.as_chunks::<8>();
@@ -850,10 +835,7 @@ mod tests {
         }
         // A positive extent whose `levels / extent` overflows is flat, not infinitely fine.
         assert_eq!(MortonQuantizer::new30(&tiny).scale(), Vec3::ZERO);
-        assert_eq!(
-            morton30_scalar(Vec3::splat(1.0e-40), &MortonQuantizer::new30(&tiny)),
-            0
-        );
+        assert_eq!(morton30_scalar(Vec3::splat(1.0e-40), &MortonQuantizer::new30(&tiny)), 0);
         assert_eq!(
             morton30_scalar(Vec3::ONE, &MortonQuantizer::new30(&unit())),
             MORTON30_MAX
@@ -868,10 +850,7 @@ mod tests {
     fn max_corner_is_all_ones_for_random_boxes() {
         let mut r = Rng(0x9E37_79B9_7F4A_7C15);
         for _ in 0..20_000 {
-            let (a, b) = (
-                Vec3::new(r.f(), r.f(), r.f()),
-                Vec3::new(r.f(), r.f(), r.f()),
-            );
+            let (a, b) = (Vec3::new(r.f(), r.f(), r.f()), Vec3::new(r.f(), r.f(), r.f()));
             let b = Aabb::new(a.min(b), a.max(b));
             assert_eq!(
                 morton30_scalar(b.max, &MortonQuantizer::new30(&b)),
@@ -883,16 +862,8 @@ mod tests {
                 MORTON63_MAX,
                 "{b:?}"
             );
-            assert_eq!(
-                morton30_scalar(b.min, &MortonQuantizer::new30(&b)),
-                0,
-                "{b:?}"
-            );
-            assert_eq!(
-                morton63_scalar(b.min, &MortonQuantizer::new63(&b)),
-                0,
-                "{b:?}"
-            );
+            assert_eq!(morton30_scalar(b.min, &MortonQuantizer::new30(&b)), 0, "{b:?}");
+            assert_eq!(morton63_scalar(b.min, &MortonQuantizer::new63(&b)), 0, "{b:?}");
         }
     }
 
@@ -924,11 +895,7 @@ mod tests {
     #[test]
     fn transpose8_matches_layout() {
         let p: [f32; 24] = core::array::from_fn(|i| i as f32);
-        for [x, y, z] in [
-            transpose8(&p),
-            transpose8_gather(&p),
-            transpose8_permute(&p),
-        ] {
+        for [x, y, z] in [transpose8(&p), transpose8_gather(&p), transpose8_permute(&p)] {
             for i in 0..8 {
                 assert_eq!(x.to_array()[i], (3 * i) as f32);
                 assert_eq!(y.to_array()[i], (3 * i + 1) as f32);
@@ -958,11 +925,7 @@ mod tests {
                     };
                     s.wrapping_shl(S) // bits past 31 are lost
                 });
-                assert_eq!(
-                    spread_x8_shift::<B, S>(v).to_array(),
-                    want,
-                    "shift B {B} S {S}"
-                );
+                assert_eq!(spread_x8_shift::<B, S>(v).to_array(), want, "shift B {B} S {S}");
                 // The byte indices assume little-endian lanes (`FAST_SPREAD` checks the same).
                 if cfg!(target_endian = "little") {
                     let got = spread_x8_shuffle::<B, S>(v).to_array();
@@ -1032,8 +995,7 @@ mod tests {
     fn slices_handle_every_length() {
         let q30 = MortonQuantizer::new30(&Aabb::new(Vec3::ZERO, Vec3::splat(20.0)));
         let q63 = MortonQuantizer::new63(&Aabb::new(Vec3::ZERO, Vec3::splat(20.0)));
-        let pts: [Vec3; 20] =
-            core::array::from_fn(|i| Vec3::new(i as f32, 20.0 - i as f32, (i * i) as f32 * 0.1));
+        let pts: [Vec3; 20] = core::array::from_fn(|i| Vec3::new(i as f32, 20.0 - i as f32, (i * i) as f32 * 0.1));
         for n in 0..=20 {
             for m in 0..=20 {
                 let (mut o30, mut o63) = ([u32::MAX; 20], [u64::MAX; 20]);

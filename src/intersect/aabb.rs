@@ -2,13 +2,16 @@
 //!
 //! For each axis the ray's entry and exit distances are `(bound - origin) * inv_dir`, with the near
 //! bound chosen by the **sign bit** of the direction component. The box is hit when
-//! `max(near_x, near_y, near_z, tmin) <= min(far_x, far_y, far_z, tmax) * (1 + 2 gamma(3))`.
+//! `near <= far + |far| 2 gamma(3)` with `near = max(near_x, near_y, near_z, tmin)` and
+//! `far = min(far_x, far_y, far_z, tmax)`.
 //!
 //! # Policy (identical in every width)
 //! - **Conservative far bound.** Each distance carries three roundings (subtraction, reciprocal,
-//!   product), so the far distance is scaled by `1 + 2 gamma(3)` (Ize 2013, eq. 8): a ray that
-//!   touches a box in exact arithmetic is never culled. The price is that boxes a few ULPs away may
-//!   be visited too; a BVH only loses a little time.
+//!   product), so the far distance is moved outwards by `|far| 2 gamma(3)` (Ize 2013, eq. 8, which
+//!   writes `far (1 + 2 gamma(3))` for `far >= 0`; the absolute value keeps the bound conservative
+//!   for rays with `tmin < 0`, where a box behind the origin has a negative far distance): a ray
+//!   that touches a box in exact arithmetic is never culled. The price is that boxes a few ULPs
+//!   away may be visited too; a BVH only loses a little time.
 //! - **`+0` and `-0` direction components.** `1 / +-0 = +-inf` and the near bound follows the sign
 //!   bit, so both zeros give the same answer: a ray parallel to a slab overlaps it for every `t`
 //!   when its origin lies in the closed interval `[min, max]` of that axis, and never otherwise.
@@ -27,10 +30,11 @@
 
 use super::PreparedRay;
 use crate::geometry::Aabb;
-use crate::math::{Lane, f32x4, f32x8, gamma, max_l, min_l};
+use crate::math::{Lane, abs, f32x4, f32x8, gamma, max_l, min_l};
 
-/// Scale of the far distance that makes the test conservative: `1 + 2 gamma(3)`.
-pub const FAR_SCALE: f32 = 1.0 + 2.0 * gamma(3);
+/// Relative widening of the far distance that makes the test conservative: `2 gamma(3)`; the box
+/// is hit when `near <= far + |far| FAR_SLACK`.
+pub const FAR_SLACK: f32 = 2.0 * gamma(3);
 
 /// `N` boxes in structure-of-arrays form: `min[axis]` holds lane `i`'s lower bound on `axis`.
 ///
@@ -114,7 +118,7 @@ pub fn intersect_aabb_scalar(ray: &PreparedRay, b: &Aabb) -> Option<f32> {
         near = max_l((lo - o) * inv, near);
         far = min_l((hi - o) * inv, far);
     }
-    if near <= far * FAR_SCALE {
+    if near <= far + abs(far) * FAR_SLACK {
         Some(near)
     } else {
         None
@@ -137,7 +141,7 @@ pub fn intersect_aabb_lanes<L: Lane>(ray: &PreparedRay, b: &AabbLanes<L>) -> (L,
         near = ((lo - o) * inv).max_l(near);
         far = ((hi - o) * inv).min_l(far);
     }
-    let hit = near.le(far * L::splat(FAR_SCALE));
+    let hit = near.le(far + far.abs() * L::splat(FAR_SLACK));
     (near, hit.bitmask())
 }
 
@@ -181,14 +185,8 @@ mod tests {
     fn hit(o: Vec3, d: Vec3, b: Aabb) -> bool {
         let r = PreparedRay::new(&Ray::new(o, d));
         let s = intersect_aabb_scalar(&r, &b).is_some();
-        assert_eq!(
-            s,
-            intersect_aabb_x4(&r, &AabbX4::from_boxes(&[b; 4])).1 == 0xf
-        );
-        assert_eq!(
-            s,
-            intersect_aabb_x8(&r, &AabbX8::from_boxes(&[b; 8])).1 == 0xff
-        );
+        assert_eq!(s, intersect_aabb_x4(&r, &AabbX4::from_boxes(&[b; 4])).1 == 0xf);
+        assert_eq!(s, intersect_aabb_x8(&r, &AabbX8::from_boxes(&[b; 8])).1 == 0xff);
         s
     }
 
@@ -197,13 +195,7 @@ mod tests {
         let unit = Aabb::new(Vec3::ZERO, Vec3::ONE);
         let flat = Aabb::new(Vec3::new(0.0, 0.0, 0.5), Vec3::new(1.0, 1.0, 0.5));
         let cases: &[(&str, Vec3, Vec3, Aabb, bool)] = &[
-            (
-                "straight in",
-                Vec3::new(0.5, 0.5, -1.0),
-                Vec3::Z,
-                unit,
-                true,
-            ),
+            ("straight in", Vec3::new(0.5, 0.5, -1.0), Vec3::Z, unit, true),
             ("behind", Vec3::new(0.5, 0.5, 2.0), Vec3::Z, unit, false),
             ("origin inside", Vec3::splat(0.5), Vec3::X, unit, true),
             (
@@ -269,13 +261,7 @@ mod tests {
                 unit,
                 true,
             ),
-            (
-                "flat box crossed",
-                Vec3::new(0.5, 0.5, -1.0),
-                Vec3::Z,
-                flat,
-                true,
-            ),
+            ("flat box crossed", Vec3::new(0.5, 0.5, -1.0), Vec3::Z, flat, true),
             (
                 "flat box crossed backwards",
                 Vec3::new(0.5, 0.5, 2.0),
@@ -297,28 +283,10 @@ mod tests {
                 flat,
                 false,
             ),
-            (
-                "flat box missed",
-                Vec3::new(1.5, 0.5, -1.0),
-                Vec3::Z,
-                flat,
-                false,
-            ),
-            (
-                "diagonal through corner",
-                Vec3::splat(-1.0),
-                Vec3::ONE,
-                unit,
-                true,
-            ),
+            ("flat box missed", Vec3::new(1.5, 0.5, -1.0), Vec3::Z, flat, false),
+            ("diagonal through corner", Vec3::splat(-1.0), Vec3::ONE, unit, true),
             ("empty box", Vec3::ZERO, Vec3::ONE, Aabb::EMPTY, false),
-            (
-                "NaN origin",
-                Vec3::new(f32::NAN, 0.5, -1.0),
-                Vec3::Z,
-                unit,
-                false,
-            ),
+            ("NaN origin", Vec3::new(f32::NAN, 0.5, -1.0), Vec3::Z, unit, false),
             (
                 "NaN direction",
                 Vec3::new(0.5, 0.5, -1.0),
@@ -327,13 +295,7 @@ mod tests {
                 false,
             ),
             ("zero direction", Vec3::splat(0.5), Vec3::ZERO, unit, false),
-            (
-                "inf origin",
-                Vec3::new(f32::INFINITY, 0.5, 0.5),
-                -Vec3::X,
-                unit,
-                false,
-            ),
+            ("inf origin", Vec3::new(f32::INFINITY, 0.5, 0.5), -Vec3::X, unit, false),
         ];
         for (name, o, d, b, want) in cases {
             assert_eq!(hit(*o, *d, *b), *want, "{name}");
@@ -343,11 +305,45 @@ mod tests {
     #[test]
     fn tmin_tmax_are_honoured() {
         let unit = Aabb::new(Vec3::ZERO, Vec3::ONE);
-        let r =
-            |t0, t1| PreparedRay::new(&Ray::with_range(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, t0, t1));
+        let r = |t0, t1| PreparedRay::new(&Ray::with_range(Vec3::new(0.5, 0.5, -1.0), Vec3::Z, t0, t1));
         assert!(intersect_aabb_scalar(&r(0.0, 0.5), &unit).is_none());
         assert!(intersect_aabb_scalar(&r(2.5, 9.0), &unit).is_none());
         assert_eq!(intersect_aabb_scalar(&r(1.5, 9.0), &unit), Some(1.5));
         assert!(intersect_aabb_scalar(&r(0.0, 1.0), &unit).is_some()); // touching at t = 1
+    }
+
+    /// Found by fuzzing (`fuzz/seeds/kernels/crash-box-*-negative-t`): with `tmin < 0`, a box
+    /// touched at a single negative `t` must be hit; scaling the far distance by `1 + 2 gamma(3)`
+    /// moved a negative far distance inwards and missed it.
+    #[test]
+    fn boxes_touched_at_negative_t() {
+        let flat = Aabb::new(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.0));
+        let unit = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let all = |o: Vec3, d: Vec3| Ray::with_range(o, d, f32::NEG_INFINITY, f32::INFINITY);
+        let cases = [
+            (
+                "flat box behind the origin",
+                all(Vec3::new(0.0, 0.0, 1.0), Vec3::Z),
+                flat,
+            ),
+            (
+                "flat box far behind",
+                all(Vec3::new(0.3, 0.7, 12345.6), Vec3::new(1e-5, -1e-5, 3.0)),
+                flat,
+            ),
+            (
+                "edge grazed behind",
+                all(Vec3::new(2.0, 1.0, 3.0), Vec3::new(1.0, 0.0, 1.0)),
+                unit,
+            ),
+            ("corner grazed behind", all(Vec3::new(3.0, 3.0, 3.0), Vec3::ONE), unit),
+        ];
+        for (name, ray, b) in cases {
+            let r = PreparedRay::new(&ray);
+            let s = intersect_aabb_scalar(&r, &b);
+            assert!(s.is_some_and(|t| t < 0.0), "{name}: {s:?}");
+            assert_eq!(intersect_aabb_x4(&r, &AabbX4::from_boxes(&[b; 4])).1, 0xf, "{name}");
+            assert_eq!(intersect_aabb_x8(&r, &AabbX8::from_boxes(&[b; 8])).1, 0xff, "{name}");
+        }
     }
 }

@@ -36,9 +36,7 @@ mod packet;
 mod soa;
 pub mod watertight;
 
-pub use aabb::{
-    AabbLanes, AabbX4, AabbX8, intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8,
-};
+pub use aabb::{AabbLanes, AabbX4, AabbX8, intersect_aabb_scalar, intersect_aabb_x4, intersect_aabb_x8};
 pub use packet::{PreparedPacket, PreparedPacket4, PreparedPacket8};
 pub use soa::{HitLanes, TriangleLanes, TriangleX4, TriangleX8};
 
@@ -155,23 +153,13 @@ mod tests {
         let x4 = TriangleX4::pack(&[*tri], &[0]);
         let x8 = TriangleX8::pack(&[*tri], &[0]);
         let wide = [
-            [
-                moller::intersect_x4(&pre, &x4),
-                moller::intersect_x8(&pre, &x8),
-            ],
-            [
-                watertight::intersect_x4(&pre, &x4),
-                watertight::intersect_x8(&pre, &x8),
-            ],
+            [moller::intersect_x4(&pre, &x4), moller::intersect_x8(&pre, &x8)],
+            [watertight::intersect_x4(&pre, &x4), watertight::intersect_x8(&pre, &x8)],
         ];
         let scalar: [Kernel; 2] = [moller::intersect_scalar, watertight::intersect_scalar];
         core::array::from_fn(|k| {
             let s = scalar[k](&pre, tri, 0);
-            assert_eq!(
-                wide[k],
-                [s, s],
-                "test {k}: widths disagree on {ray:?} {tri:?}"
-            );
+            assert_eq!(wide[k], [s, s], "test {k}: widths disagree on {ray:?} {tri:?}");
             let mut p = PreparedPacket8::new(&[*ray; 8]);
             let mut h = HitLanes::default();
             let m = if k == 0 {
@@ -204,12 +192,7 @@ mod tests {
                 Some(2.0),
             ),
             ("behind the origin", Ray::new(o, -Vec3::Z), tri, None),
-            (
-                "unnormalised direction",
-                Ray::new(o, Vec3::Z * 4.0),
-                tri,
-                Some(0.5),
-            ),
+            ("unnormalised direction", Ray::new(o, Vec3::Z * 4.0), tri, Some(0.5)),
             (
                 "parallel, in the plane",
                 Ray::new(Vec3::new(-5.0, 0.0, 2.0), Vec3::X),
@@ -217,43 +200,18 @@ mod tests {
                 None,
             ),
             ("parallel, off the plane", Ray::new(o, Vec3::X), tri, None),
-            (
-                "tmax exclusive",
-                Ray::with_range(o, Vec3::Z, 0.0, 2.0),
-                tri,
-                None,
-            ),
-            (
-                "tmin inclusive",
-                Ray::with_range(o, Vec3::Z, 2.0, 3.0),
-                tri,
-                Some(2.0),
-            ),
-            (
-                "beyond tmax",
-                Ray::with_range(o, Vec3::Z, 0.0, 1.0),
-                tri,
-                None,
-            ),
+            ("tmax exclusive", Ray::with_range(o, Vec3::Z, 0.0, 2.0), tri, None),
+            ("tmin inclusive", Ray::with_range(o, Vec3::Z, 2.0, 3.0), tri, Some(2.0)),
+            ("beyond tmax", Ray::with_range(o, Vec3::Z, 0.0, 1.0), tri, None),
             (
                 "-0 direction components",
                 Ray::new(o, Vec3::new(-0.0, -0.0, 1.0)),
                 tri,
                 Some(2.0),
             ),
-            (
-                "outside",
-                Ray::new(Vec3::new(5.0, 0.0, 0.0), Vec3::Z),
-                tri,
-                None,
-            ),
+            ("outside", Ray::new(Vec3::new(5.0, 0.0, 0.0), Vec3::Z), tri, None),
             ("NaN origin", Ray::new(nan, Vec3::Z), tri, None),
-            (
-                "NaN direction",
-                Ray::new(o, Vec3::new(0.0, f32::NAN, 1.0)),
-                tri,
-                None,
-            ),
+            ("NaN direction", Ray::new(o, Vec3::new(0.0, f32::NAN, 1.0)), tri, None),
             (
                 "inf direction",
                 Ray::new(o, Vec3::new(0.0, 0.0, f32::INFINITY)),
@@ -261,18 +219,8 @@ mod tests {
                 None,
             ),
             ("zero direction", Ray::new(o, Vec3::ZERO), tri, None),
-            (
-                "NaN tmax",
-                Ray::with_range(o, Vec3::Z, 0.0, f32::NAN),
-                tri,
-                None,
-            ),
-            (
-                "NaN vertex",
-                Ray::new(o, Vec3::Z),
-                [tri[0], nan, tri[2]],
-                None,
-            ),
+            ("NaN tmax", Ray::with_range(o, Vec3::Z, 0.0, f32::NAN), tri, None),
+            ("NaN vertex", Ray::new(o, Vec3::Z), [tri[0], nan, tri[2]], None),
             (
                 "inf vertex",
                 Ray::new(o, Vec3::Z),
@@ -311,12 +259,7 @@ mod tests {
                 ],
                 Some(2.0),
             ),
-            (
-                "large (1e12)",
-                Ray::new(o, Vec3::Z),
-                tri.map(|v| v * 1e12),
-                Some(2e12),
-            ),
+            ("large (1e12)", Ray::new(o, Vec3::Z), tri.map(|v| v * 1e12), Some(2e12)),
             (
                 "small (1e-12)",
                 Ray::new(o, Vec3::Z),
@@ -338,10 +281,7 @@ mod tests {
         for (name, ray, t, want) in cases {
             for (k, got) in all_widths(ray, t).iter().enumerate() {
                 let got = got.map(|h| h.t);
-                assert!(
-                    close(got, *want),
-                    "{name} (test {k}): got {got:?}, want {want:?}"
-                );
+                assert!(close(got, *want), "{name} (test {k}): got {got:?}, want {want:?}");
             }
         }
     }
@@ -358,11 +298,7 @@ mod tests {
             Vec3::new(-1.0, -(1.0 + e(15)), 1.0),
         ];
         let (bx, by, cx, cy) = (tri[1].x, tri[1].y, tri[2].x, tri[2].y);
-        assert_eq!(
-            cx * by - cy * bx,
-            0.0,
-            "the f32 edge function rounds to zero"
-        );
+        assert_eq!(cx * by - cy * bx, 0.0, "the f32 edge function rounds to zero");
         assert!(
             (cx as f64) * (by as f64) - (cy as f64) * (bx as f64) > 0.0,
             "but is positive"

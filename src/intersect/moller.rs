@@ -76,12 +76,7 @@ fn core<L: Lane>(o: [L; 3], d: [L; 3], v: &[[L; 3]; 3], tmin: L, tmax: L) -> (L,
     let vv = ((dx * qx + dy * qy) + dz * qz) * inv;
     let t = ((e2x * qx + e2y * qy) + e2z * qz) * inv;
     let zero = L::splat(0.0);
-    let hit = det.ne(zero)
-        & u.ge(zero)
-        & vv.ge(zero)
-        & (u + vv).le(L::splat(1.0))
-        & t.ge(tmin)
-        & t.lt(tmax);
+    let hit = det.ne(zero) & u.ge(zero) & vv.ge(zero) & (u + vv).le(L::splat(1.0)) & t.ge(tmin) & t.lt(tmax);
     (hit, t, u, vv)
 }
 
@@ -102,10 +97,7 @@ pub fn hit_mask<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes
 
 /// Closest hit of one ray among `N` SoA triangles (ties: lowest lane).
 #[inline(always)]
-pub fn intersect_lanes<L: Lane, const N: usize>(
-    ray: &PreparedRay,
-    tris: &TriangleLanes<L, N>,
-) -> Option<Hit> {
+pub fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit> {
     let (m, t, u, v) = lanes_one_ray(ray, &tris.v);
     closest_lane(m & tris.valid, t, u, v, &tris.prim)
 }

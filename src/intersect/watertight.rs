@@ -29,9 +29,7 @@ use crate::math::Lane;
 #[inline(never)]
 #[cold]
 fn edges_f64(ax: f32, ay: f32, bx: f32, by: f32, cx: f32, cy: f32) -> (f32, f32, f32) {
-    let (ax, ay, bx, by, cx, cy) = (
-        ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
-    );
+    let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
     (
         (cx * by - cy * bx) as f32,
         (ax * cy - ay * cx) as f32,
@@ -112,8 +110,7 @@ fn core<L: Lane>(p: [[L; 3]; 3], s: [L; 3], tmin: L, tmax: L, relevant: u32) -> 
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
-            (l[6][i], l[7][i], l[8][i]) =
-                edges_f64(l[0][i], l[1][i], l[2][i], l[3][i], l[4][i], l[5][i]);
+            (l[6][i], l[7][i], l[8][i]) = edges_f64(l[0][i], l[1][i], l[2][i], l[3][i], l[4][i], l[5][i]);
         }
         (u, v, w) = (L::load(&l[6]), L::load(&l[7]), L::load(&l[8]));
     }
@@ -129,10 +126,7 @@ fn core<L: Lane>(p: [[L; 3]; 3], s: [L; 3], tmin: L, tmax: L, relevant: u32) -> 
 
 /// One ray against `N` SoA triangles: `(mask of valid lanes hit, t, u, v)`.
 #[inline(always)]
-fn lanes_one_ray<L: Lane, const N: usize>(
-    ray: &PreparedRay,
-    tris: &TriangleLanes<L, N>,
-) -> (u32, L, L, L) {
+fn lanes_one_ray<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> (u32, L, L, L) {
     let o = ray.origin.to_array().map(L::splat);
     let p = tris.v.map(|vtx| ray.k.map(|k| vtx[k] - o[k]));
     let s = ray.shear.to_array().map(L::splat);
@@ -148,10 +142,7 @@ pub fn hit_mask<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes
 
 /// Closest hit of one ray among `N` SoA triangles (ties: lowest lane).
 #[inline(always)]
-pub fn intersect_lanes<L: Lane, const N: usize>(
-    ray: &PreparedRay,
-    tris: &TriangleLanes<L, N>,
-) -> Option<Hit> {
+pub fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit> {
     let (m, t, u, v) = lanes_one_ray(ray, tris);
     closest_lane(m, t, u, v, &tris.prim)
 }
@@ -229,11 +220,7 @@ pub fn intersect_packet<L: Lane, const N: usize>(
     let active = rays.active();
     let (m, t, u, v) = core(p, rays.shear, rays.tmin, rays.tmax, active);
     let hit = L::load(&core::array::from_fn::<f32, 8, _>(|i| {
-        if m >> i & 1 == 1 {
-            f32::from_bits(u32::MAX)
-        } else {
-            0.0
-        }
+        if m >> i & 1 == 1 { f32::from_bits(u32::MAX) } else { 0.0 }
     }));
     super::packet::commit(rays, hits, hit, t, u, v, prim)
 }

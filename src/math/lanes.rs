@@ -152,32 +152,15 @@ mod tests {
     use super::*;
     use crate::math::{max_l, min_l};
 
-    const SPECIALS: [f32; 8] = [
-        0.0,
-        -0.0,
-        1.0,
-        -1.0,
-        f32::NAN,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        1e-40,
-    ];
+    const SPECIALS: [f32; 8] = [0.0, -0.0, 1.0, -1.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e-40];
 
     fn check<L: Lane>() {
         for &a in &SPECIALS {
             for &b in &SPECIALS {
                 let (la, lb) = (L::splat(a), L::splat(b));
                 for i in 0..L::N {
-                    assert_eq!(
-                        la.max_l(lb).lane(i).to_bits(),
-                        max_l(a, b).to_bits(),
-                        "max {a} {b}"
-                    );
-                    assert_eq!(
-                        la.min_l(lb).lane(i).to_bits(),
-                        min_l(a, b).to_bits(),
-                        "min {a} {b}"
-                    );
+                    assert_eq!(la.max_l(lb).lane(i).to_bits(), max_l(a, b).to_bits(), "max {a} {b}");
+                    assert_eq!(la.min_l(lb).lane(i).to_bits(), min_l(a, b).to_bits(), "min {a} {b}");
                     assert_eq!(la.gt(lb).bitmask() >> i & 1 == 1, a > b);
                     assert_eq!(la.ge(lb).bitmask() >> i & 1 == 1, a >= b);
                     assert_eq!(la.lt(lb).bitmask() >> i & 1 == 1, a < b);

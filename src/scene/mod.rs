@@ -169,8 +169,7 @@ pub fn icosphere(subdivisions: u32) -> Mesh {
     ];
     for _ in 0..subdivisions {
         // Midpoints shared between the two triangles of an edge, keyed by the sorted vertex pair.
-        let mut mids: alloc::collections::BTreeMap<(u32, u32), u32> =
-            alloc::collections::BTreeMap::new();
+        let mut mids: alloc::collections::BTreeMap<(u32, u32), u32> = alloc::collections::BTreeMap::new();
         let mut mid = |a: u32, b: u32, pos: &mut Vec<Vec3>| -> u32 {
             *mids.entry((a.min(b), a.max(b))).or_insert_with(|| {
                 pos.push(((pos[a as usize] + pos[b as usize]) * 0.5).normalize());
@@ -275,20 +274,9 @@ pub enum Aim {
 /// let rays = scene::aimed_rays(&m, Aim::Vertices, 2, 3.0, 7);
 /// assert_eq!(rays.len(), 2 * m.positions.len());
 /// ```
-pub fn aimed_rays(
-    mesh: &Mesh,
-    aim: Aim,
-    per_target: usize,
-    distance: f32,
-    seed: u64,
-) -> Vec<crate::Ray> {
+pub fn aimed_rays(mesh: &Mesh, aim: Aim, per_target: usize, distance: f32, seed: u64) -> Vec<crate::Ray> {
     let mut rng = Rng::new(seed);
-    let pos = |i: u32| {
-        mesh.positions
-            .get(i as usize)
-            .copied()
-            .unwrap_or(Vec3::ZERO)
-    };
+    let pos = |i: u32| mesh.positions.get(i as usize).copied().unwrap_or(Vec3::ZERO);
     let mut normal = alloc::vec![Vec3::ZERO; mesh.positions.len()];
     for &[a, b, c] in &mesh.indices {
         let n = (pos(b) - pos(a)).cross(pos(c) - pos(a));
