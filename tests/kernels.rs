@@ -234,6 +234,17 @@ proptest! {
     }
 
     #[test]
+    fn packets_coherent((r0, tris) in scene(bounded()), origins in proptest::array::uniform8(vec3(bounded())), invalid in 0u8..=255) {
+        // One direction for every lane (the watertight packet kernel's shared-permutation path),
+        // some lanes invalid (NaN origin) so that they are inactive.
+        let rays: [Ray; 8] = core::array::from_fn(|i| {
+            let o = if invalid >> i & 1 == 1 && i > 0 { Vec3::NAN } else if i == 0 { r0.origin } else { origins[i] };
+            Ray::new(o, r0.direction)
+        });
+        check_packets(&rays, &tris[0])?;
+    }
+
+    #[test]
     fn boxes_bounded(ray in (vec3(bounded()), vec3(bounded())).prop_map(|(o, d)| Ray::new(o, d)), b in boxes(bounded())) {
         check_boxes(&ray, &b)?;
     }

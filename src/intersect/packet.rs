@@ -31,6 +31,9 @@ pub struct PreparedPacket<L, const N: usize> {
     pub shear: [L; 3],
     /// Watertight axis permutation as lane masks: `k_sel[j][a]` is set where `k[j] == a`.
     pub k_sel: [[L; 3]; 3],
+    /// The permutation shared by every active lane, if they all share one (coherent packets do):
+    /// the watertight kernel then permutes the triangle once instead of blending per lane.
+    pub k_uniform: Option<[usize; 3]>,
 }
 
 /// Four rays, SoA.
@@ -67,6 +70,12 @@ impl<L: Lane, const N: usize> PreparedPacket<L, N> {
             tmax: lanes(&|r| r.tmax),
             shear: axis3(&|r, a| r.shear[a]),
             k_sel: [0, 1, 2].map(|j| axis3(&|r, a| mask(r.k[j] == a))),
+            k_uniform: {
+                // Inactive lanes never hit, so their permutation does not matter.
+                let mut ks = rays.iter().take(N).filter(|r| r.tmin < r.tmax).map(|r| r.k);
+                let first = ks.next().unwrap_or([0, 1, 2]);
+                ks.all(|k| k == first).then_some(first)
+            },
         }
     }
 

@@ -115,22 +115,20 @@ impl<L: Lane, const N: usize> HitLanes<L, N> {
 /// The closest hit among the lanes in `mask`; ties go to the lowest lane (as a scalar loop over the
 /// lanes with a strict `<` would).
 #[inline(always)]
-pub(crate) fn closest_lane<L: Lane>(mut mask: u32, t: L, u: L, v: L, prim: &[u32]) -> Option<Hit> {
+pub(crate) fn closest_lane<L: Lane>(mask: u32, t: L, u: L, v: L, prim: &[u32]) -> Option<Hit> {
     if mask == 0 {
         return None;
     }
+    // Branch-free: the minimum over the masked lanes (hit distances are never NaN), then the
+    // lowest masked lane holding it.
     let mut ta = [0.0f32; 8];
     t.store(&mut ta);
     let mut best = f32::INFINITY;
-    let mut lane = usize::MAX;
-    while mask != 0 {
-        let i = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        if ta[i] < best || lane == usize::MAX {
-            best = ta[i];
-            lane = i;
-        }
+    for (i, &x) in ta.iter().enumerate().take(L::N) {
+        let x = if mask >> i & 1 != 0 { x } else { f32::INFINITY };
+        best = if x < best { x } else { best };
     }
+    let lane = (t.eq(L::splat(best)).bitmask() & mask).trailing_zeros() as usize;
     Some(Hit {
         t: best,
         u: u.lane(lane),
