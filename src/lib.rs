@@ -15,7 +15,9 @@
 //! ```
 //! Present today: [`geometry`] (boxes, rays, hits, zero-copy triangle input, Morton codes),
 //! [`intersect`] (robust slab test, Möller-Trumbore and watertight ray/triangle tests in scalar,
-//! x4, x8 and packet form), [`math`] (lane types) and [`scene`] (bundled bunny, procedural meshes).
+//! x4, x8 and packet form), [`composite`] (sort-last compositing: over and depth kernels,
+//! direct-send, binary-swap and radix-k schedules, in-process and MPI transports, a tile queue),
+//! [`math`] (lane types) and [`scene`] (bundled bunny, procedural meshes).
 //! BVH construction, wide BVHs and traversal, volume rendering and compositing follow.
 //!
 //! ## Example
@@ -33,13 +35,15 @@
 //! |---|---|---|
 //! | (none) | | all kernels: slab test, triangle tests, Morton codes, on caller-provided slices; `#![no_std]`, no allocation |
 //! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); later the BVH builders |
-//! | `std` | yes | `alloc`, plus std's float intrinsics in `glam` |
+//! | `std` | yes | `alloc`, plus std's float intrinsics in `glam`; threads ([`composite::ThreadTransport`], [`composite::render_tiles`]) |
+//! | `mpi` | | [`composite`]'s `MpiTransport` over the system's MPI library (`libopenmpi-dev`, `libclang-dev`) |
 //!
 //! ## Where the tunables live
 //! | stage | knob | where |
 //! |---|---|---|
 //! | slab test | conservative far bound `far + \|far\| 2 gamma(3)` | [`intersect::aabb::FAR_SLACK`] |
 //! | Morton codes | bits per axis (10 or 21), quantisation bounds | [`geometry::morton::MortonQuantizer`] |
+//! | compositing | k-vector, visibility order, sparse encoding, root | [`composite::Plan`], [`composite::auto_kvec`] with [`composite::CostModel`] |
 //! | SIMD width | `wide` picks AVX / SSE / NEON from target features | build with `-C target-cpu=native` |
 //!
 //! ## Bad input
@@ -54,6 +58,7 @@ extern crate alloc;
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod composite;
 pub mod geometry;
 pub mod intersect;
 pub mod math;

@@ -1,0 +1,276 @@
+//! The compositing executor, generic over a [`Transport`]: runs a radix-k or tree schedule on one
+//! rank's full-size partial image and gathers the result on a root rank.
+
+use super::pixel::Pixel;
+use super::schedule::{KVec, RadixK, tree_partner, tree_rounds};
+use super::sparse::{DecodeError, decode_composite, encode};
+use alloc::vec;
+use alloc::vec::Vec;
+
+/// Moves bytes between ranks. Implementations: [`ThreadTransport`](super::ThreadTransport)
+/// (in-process, for tests) and, behind the feature `mpi`, `MpiTransport`.
+pub trait Transport {
+    /// This rank, `0 .. size`.
+    fn rank(&self) -> u32;
+    /// Number of ranks.
+    fn size(&self) -> u32;
+    /// Sends every `(to, bytes)` of `sends` and returns one message from each rank of `from`, in
+    /// that order, all with `tag`. When every rank calls it with matching lists it must not
+    /// deadlock (send without blocking, or post the receives first).
+    fn exchange(&mut self, tag: u32, sends: Vec<(u32, Vec<u8>)>, from: &[u32]) -> Result<Vec<Vec<u8>>, TransportError>;
+}
+
+/// A transport failure (a peer went away, or MPI reported an error).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TransportError(pub &'static str);
+
+impl core::fmt::Display for TransportError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "transport: {}", self.0)
+    }
+}
+
+impl core::error::Error for TransportError {}
+
+/// Why compositing failed.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CompositeError {
+    /// The order is not a permutation of `0 .. size`, or the k-vector's product is not `size`.
+    BadPlan,
+    /// The image is larger than `u32::MAX` pixels.
+    ImageTooLarge,
+    /// The transport failed.
+    Transport(TransportError),
+    /// A received message was malformed.
+    Decode(DecodeError),
+}
+
+impl core::fmt::Display for CompositeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::BadPlan => f.write_str("compositing plan does not match the ranks"),
+            Self::ImageTooLarge => f.write_str("image has more than u32::MAX pixels"),
+            Self::Transport(e) => write!(f, "{e}"),
+            Self::Decode(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl core::error::Error for CompositeError {}
+
+impl From<TransportError> for CompositeError {
+    fn from(e: TransportError) -> Self {
+        Self::Transport(e)
+    }
+}
+
+impl From<DecodeError> for CompositeError {
+    fn from(e: DecodeError) -> Self {
+        Self::Decode(e)
+    }
+}
+
+/// Which schedule to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Schedule {
+    /// Radix-k with the given k-vector (direct-send `[P]`, binary-swap `[2, .., 2]`, or any).
+    RadixK(KVec),
+    /// The naive binary tree reduction of whole images.
+    Tree,
+}
+
+/// What to composite and how.
+#[derive(Clone, Debug)]
+pub struct Plan<'a> {
+    /// The schedule.
+    pub schedule: Schedule,
+    /// Visibility order: `order[v]` is the transport rank whose image is `v`-th from the viewer.
+    /// For depth compositing any permutation gives the same image.
+    pub order: &'a [u32],
+    /// The transport rank that receives the final image.
+    pub root: u32,
+    /// Send only non-empty pixels (run-length encoded); `false` sends every pixel.
+    pub sparse: bool,
+}
+
+/// What one rank did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CompositeStats {
+    /// Bytes this rank sent during the compositing rounds (headers included, final gather not).
+    pub bytes_sent: u64,
+    /// Bytes this rank sent in the final gather.
+    pub gather_bytes: u64,
+    /// Messages sent during the rounds.
+    pub messages: u32,
+    /// Wall time of each round and then of the gather, in seconds (zeros without `std`).
+    pub round_seconds: Vec<f64>,
+}
+
+fn now() -> f64 {
+    #[cfg(feature = "std")]
+    {
+        use std::sync::OnceLock;
+        use std::time::Instant;
+        static T0: OnceLock<Instant> = OnceLock::new();
+        T0.get_or_init(Instant::now).elapsed().as_secs_f64()
+    }
+    #[cfg(not(feature = "std"))]
+    {
+        0.0
+    }
+}
+
+/// Composites this rank's full-size partial `image` with every other rank's: returns the final
+/// image on `plan.root` (`Some`) and `None` elsewhere, with statistics. Every rank must call it with
+/// the same plan and image size.
+///
+/// ```
+/// use strahl::composite::{DepthPixel, KVec, Plan, Schedule, ThreadTransport, Transport, composite, composite_serial};
+/// let images: Vec<Vec<DepthPixel>> = (0..3)
+///     .map(|r| (0..10).map(|i| DepthPixel::new(((i * 7 + r * 3) % 5) as f32, r)).collect())
+///     .collect();
+/// let order = [0, 1, 2];
+/// let results = ThreadTransport::run(3, |t| {
+///     let plan = Plan { schedule: Schedule::RadixK(KVec::direct_send(3)), order: &order, root: 0, sparse: true };
+///     composite(t, &images[t.rank() as usize], &plan).unwrap().0
+/// });
+/// let serial = composite_serial(&images.iter().map(|v| v.as_slice()).collect::<Vec<_>>());
+/// assert_eq!(results[0].as_deref(), Some(serial.as_slice()));
+/// ```
+pub fn composite<P: Pixel, T: Transport>(
+    t: &mut T,
+    image: &[P],
+    plan: &Plan<'_>,
+) -> Result<(Option<Vec<P>>, CompositeStats), CompositeError> {
+    let p = t.size();
+    let me = t.rank();
+    if plan.order.len() != p as usize || plan.root >= p {
+        return Err(CompositeError::BadPlan);
+    }
+    let mut seen = vec![false; p as usize];
+    for &r in plan.order {
+        if r >= p || core::mem::replace(&mut seen[r as usize], true) {
+            return Err(CompositeError::BadPlan);
+        }
+    }
+    let n = u32::try_from(image.len()).map_err(|_| CompositeError::ImageTooLarge)?;
+    let v = plan.order.iter().position(|&r| r == me).unwrap_or(0) as u32;
+    let real = |v: u32| plan.order[v as usize];
+    let mut stats = CompositeStats::default();
+    let mut acc = image.to_vec();
+    let mut t0 = now();
+    let mut lap = |stats: &mut CompositeStats| {
+        let t1 = now();
+        stats.round_seconds.push(t1 - t0);
+        t0 = t1;
+    };
+
+    // The range this rank owns at the end, and the tag base of the gather.
+    let (owned, gather_tag) = match plan.schedule {
+        Schedule::RadixK(kvec) => {
+            if kvec.ranks() != p {
+                return Err(CompositeError::BadPlan);
+            }
+            let s = RadixK::new(kvec, n);
+            for round in 0..kvec.rounds() {
+                let mut sends = Vec::new();
+                for m in s.sends(v, round) {
+                    let mut wire = Vec::new();
+                    encode(
+                        &acc[m.range.start as usize..m.range.end as usize],
+                        plan.sparse,
+                        &mut wire,
+                    );
+                    stats.bytes_sent += wire.len() as u64;
+                    stats.messages += 1;
+                    sends.push((real(m.to), wire));
+                }
+                let from: Vec<u32> = s.receives(v, round).map(|m| real(m.from)).collect();
+                let got = t.exchange(round as u32, sends, &from)?;
+                // Blend in visibility order around our own piece (digit d).
+                let d = s.digit(v, round);
+                let mine = s.receives(v, round).next().map(|m| m.range).unwrap_or(0..0);
+                let region = &mut acc[mine.start as usize..mine.end as usize];
+                let mut members = s.receives(v, round).map(|m| m.from).zip(got.iter());
+                // Members in front of us (digits < d) composite in front, nearest last.
+                let front: Vec<_> = members.by_ref().take(d as usize).collect();
+                for (_, wire) in front.iter().rev() {
+                    decode_composite(wire, region, false)?;
+                }
+                for (_, wire) in members {
+                    decode_composite(wire, region, true)?;
+                }
+                lap(&mut stats);
+            }
+            (s.final_region(v), kvec.rounds() as u32)
+        }
+        Schedule::Tree => {
+            let rounds = tree_rounds(p);
+            for round in 0..rounds {
+                if let Some((w, receive)) = tree_partner(v, round, p) {
+                    if receive {
+                        let got = t.exchange(round, Vec::new(), &[real(w)])?;
+                        decode_composite(&got[0], &mut acc, true)?;
+                    } else {
+                        let mut wire = Vec::new();
+                        encode(&acc, plan.sparse, &mut wire);
+                        stats.bytes_sent += wire.len() as u64;
+                        stats.messages += 1;
+                        t.exchange(round, vec![(real(w), wire)], &[])?;
+                    }
+                }
+                lap(&mut stats);
+            }
+            (if v == 0 { 0..n } else { 0..0 }, rounds)
+        }
+    };
+
+    // Gather the owned ranges on the root.
+    let mut out = None;
+    if me == plan.root {
+        let mut img = vec![P::EMPTY; n as usize];
+        img[owned.start as usize..owned.end as usize].copy_from_slice(&acc[owned.start as usize..owned.end as usize]);
+        let owners: Vec<(u32, core::ops::Range<u32>)> = (0..p)
+            .filter(|&w| real(w) != me)
+            .map(|w| (w, owned_range(&plan.schedule, w, n)))
+            .filter(|(_, r)| !r.is_empty())
+            .collect();
+        let from: Vec<u32> = owners.iter().map(|(w, _)| real(*w)).collect();
+        let got = t.exchange(gather_tag, Vec::new(), &from)?;
+        for ((_, r), wire) in owners.iter().zip(&got) {
+            decode_composite(wire, &mut img[r.start as usize..r.end as usize], true)?;
+        }
+        out = Some(img);
+    } else if !owned.is_empty() {
+        let mut wire = Vec::new();
+        encode(&acc[owned.start as usize..owned.end as usize], plan.sparse, &mut wire);
+        stats.gather_bytes += wire.len() as u64;
+        t.exchange(gather_tag, vec![(plan.root, wire)], &[])?;
+    }
+    lap(&mut stats);
+    Ok((out, stats))
+}
+
+fn owned_range(s: &Schedule, v: u32, n: u32) -> core::ops::Range<u32> {
+    match s {
+        Schedule::RadixK(k) => RadixK::new(*k, n).final_region(v),
+        Schedule::Tree => {
+            if v == 0 {
+                0..n
+            } else {
+                0..0
+            }
+        }
+    }
+}
+
+/// The serial reference: `images` in visibility order (nearest first) composited front to back.
+pub fn composite_serial<P: Pixel>(images: &[&[P]]) -> Vec<P> {
+    let n = images.iter().map(|i| i.len()).max().unwrap_or(0);
+    let mut acc = vec![P::EMPTY; n];
+    for img in images {
+        let m = img.len().min(n);
+        P::composite_behind(&mut acc[..m], &img[..m]);
+    }
+    acc
+}

@@ -1,0 +1,165 @@
+//! Sort-first dynamic load balancing: image tiles handed out by an atomic counter (a tile queue),
+//! against a static split of the tiles into equal contiguous bands, one per thread.
+//!
+//! With a skewed scene (cost concentrated in a few tiles), the static split leaves threads idle
+//! while one finishes its expensive band; the queue keeps every thread busy until the last tile.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+use std::vec::Vec;
+
+/// A rectangle of pixels `[x0, x1) x [y0, y1)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tile {
+    /// Left column.
+    pub x0: u32,
+    /// Top row.
+    pub y0: u32,
+    /// One past the right column.
+    pub x1: u32,
+    /// One past the bottom row.
+    pub y1: u32,
+}
+
+impl Tile {
+    /// Pixels in the tile.
+    pub fn pixels(&self) -> usize {
+        (self.x1 - self.x0) as usize * (self.y1 - self.y0) as usize
+    }
+}
+
+/// The tiles of a `width x height` image, `size x size` (smaller at the right and bottom edges),
+/// in scanline order. A zero `size` is treated as 1.
+pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
+    let size = size.max(1);
+    let mut v = Vec::new();
+    for y0 in (0..height).step_by(size as usize) {
+        for x0 in (0..width).step_by(size as usize) {
+            v.push(Tile {
+                x0,
+                y0,
+                x1: (x0 + size).min(width),
+                y1: (y0 + size).min(height),
+            });
+        }
+    }
+    v
+}
+
+/// One thread's rendered tiles and busy seconds.
+type Done<P> = (Vec<(Tile, Vec<P>)>, f64);
+
+/// How tiles are given to threads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Assignment {
+    /// Thread `i` of `T` renders the `i`-th of `T` equal contiguous runs of tiles.
+    Static,
+    /// Threads take the next tile from a shared atomic counter until none is left.
+    Dynamic,
+}
+
+/// What a tiled render did.
+#[derive(Clone, Debug, Default)]
+pub struct TileStats {
+    /// Tiles rendered by each thread.
+    pub tiles_per_thread: Vec<usize>,
+    /// Busy seconds of each thread.
+    pub busy_seconds: Vec<f64>,
+    /// Wall seconds of the whole render.
+    pub wall_seconds: f64,
+}
+
+impl TileStats {
+    /// Load imbalance: the busiest thread's time over the mean (1 is perfect).
+    pub fn imbalance(&self) -> f64 {
+        let n = self.busy_seconds.len().max(1) as f64;
+        let mean = self.busy_seconds.iter().sum::<f64>() / n;
+        let max = self.busy_seconds.iter().cloned().fold(0.0, f64::max);
+        if mean > 0.0 { max / mean } else { 1.0 }
+    }
+}
+
+/// Renders a `width x height` image of `P` with `threads` threads: `shade(tile, out)` fills `out`
+/// (the tile's pixels, row by row). Returns the image in scanline order and statistics.
+///
+/// ```
+/// use strahl::composite::{Assignment, render_tiles};
+/// let (img, stats) = render_tiles(37, 11, 8, 2, Assignment::Dynamic, |t, out: &mut [u32]| {
+///     for (i, p) in out.iter_mut().enumerate() {
+///         let (x, y) = (t.x0 + i as u32 % (t.x1 - t.x0), t.y0 + i as u32 / (t.x1 - t.x0));
+///         *p = y * 37 + x;
+///     }
+/// });
+/// assert!(img.iter().enumerate().all(|(i, &p)| p == i as u32));
+/// assert_eq!(stats.tiles_per_thread.iter().sum::<usize>(), 5 * 2);
+/// ```
+pub fn render_tiles<P, F>(
+    width: u32,
+    height: u32,
+    tile: u32,
+    threads: usize,
+    assignment: Assignment,
+    shade: F,
+) -> (Vec<P>, TileStats)
+where
+    P: Copy + Default + Send,
+    F: Fn(Tile, &mut [P]) + Sync,
+{
+    let all = tiles(width, height, tile);
+    let threads = threads.clamp(1, all.len().max(1));
+    let next = AtomicUsize::new(0);
+    let start = Instant::now();
+    let per_thread: Vec<Done<P>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|i| {
+                let (all, next, shade) = (&all, &next, &shade);
+                s.spawn(move || {
+                    let mut done = Vec::new();
+                    let mut busy = 0.0;
+                    let mut work = |t: Tile| {
+                        let t0 = Instant::now();
+                        let mut buf = std::vec![P::default(); t.pixels()];
+                        shade(t, &mut buf);
+                        busy += t0.elapsed().as_secs_f64();
+                        done.push((t, buf));
+                    };
+                    match assignment {
+                        Assignment::Static => {
+                            let (a, b) = (i * all.len() / threads, (i + 1) * all.len() / threads);
+                            all[a..b].iter().for_each(|&t| work(t));
+                        }
+                        Assignment::Dynamic => loop {
+                            let k = next.fetch_add(1, Ordering::Relaxed);
+                            match all.get(k) {
+                                Some(&t) => work(t),
+                                None => break,
+                            }
+                        },
+                    }
+                    (done, busy)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    });
+    let mut img = std::vec![P::default(); width as usize * height as usize];
+    let mut stats = TileStats {
+        wall_seconds: start.elapsed().as_secs_f64(),
+        ..Default::default()
+    };
+    for (done, busy) in per_thread {
+        stats.tiles_per_thread.push(done.len());
+        stats.busy_seconds.push(busy);
+        for (t, buf) in done {
+            let w = (t.x1 - t.x0) as usize;
+            for (row, y) in (t.y0..t.y1).enumerate() {
+                let at = y as usize * width as usize + t.x0 as usize;
+                img[at..at + w].copy_from_slice(&buf[row * w..(row + 1) * w]);
+            }
+        }
+    }
+    (img, stats)
+}

@@ -1,0 +1,227 @@
+//! Sort-last compositing: every schedule for P = 1 ..= 16 (primes and non-powers of two included)
+//! on odd image sizes equals the serial reference: depth bit for bit, over within
+//! `OVER_F32_TOLERANCE`; binary-swap and radix-k send at most n (1 - 1/P) b bytes plus headers.
+
+use strahl::composite::{
+    CostModel, DepthPixel, KVec, OVER_F32_TOLERANCE, Pixel, Plan, Rgba8, RgbaF32, Schedule, ThreadTransport, Transport,
+    auto_kvec, composite, composite_serial,
+};
+use strahl::scene::Rng;
+
+/// Ordered factorisations worth trying for `p`: direct-send, binary-swap (powers of two), a
+/// two-level split, the reverse, and the automatic choice.
+fn schedules(p: u32) -> Vec<Schedule> {
+    let mut v = vec![Schedule::Tree, Schedule::RadixK(KVec::direct_send(p))];
+    if let Some(k) = KVec::binary_swap(p) {
+        v.push(Schedule::RadixK(k));
+    }
+    if let Some(a) = (2..p).find(|a| p.is_multiple_of(*a)) {
+        v.push(Schedule::RadixK(KVec::new(&[a, p / a]).unwrap()));
+        v.push(Schedule::RadixK(KVec::new(&[p / a, a]).unwrap()));
+    }
+    v.push(Schedule::RadixK(auto_kvec(p, 1 << 16, 16, &CostModel::shared_memory())));
+    v.dedup();
+    v
+}
+
+/// A rank's partial image: each pixel covered with probability `cover`, else empty.
+fn partial<P: Pixel>(rng: &mut Rng, n: usize, cover: f32, f: impl Fn(&mut Rng) -> P) -> Vec<P> {
+    (0..n)
+        .map(|_| if rng.f32() < cover { f(rng) } else { P::EMPTY })
+        .collect()
+}
+
+fn rgba(rng: &mut Rng) -> RgbaF32 {
+    let a = rng.f32();
+    RgbaF32([rng.f32() * a, rng.f32() * a, rng.f32() * a, a])
+}
+
+fn run<P: Pixel>(images: &[Vec<P>], order: &[u32], schedule: Schedule, root: u32, sparse: bool) -> (Vec<P>, Vec<u64>) {
+    let p = images.len() as u32;
+    let out = ThreadTransport::run(p, |t| {
+        let plan = Plan {
+            schedule,
+            order,
+            root,
+            sparse,
+        };
+        let (img, stats) = composite(t, &images[t.rank() as usize], &plan).unwrap();
+        (img, stats.bytes_sent)
+    });
+    let bytes = out.iter().map(|o| o.1).collect();
+    let img = out.into_iter().find_map(|o| o.0).expect("the root has the image");
+    (img, bytes)
+}
+
+/// A visibility order that is not the identity, so the executor's rank mapping is exercised.
+fn shuffled_order(p: u32, seed: u64) -> Vec<u32> {
+    let mut rng = Rng::new(seed);
+    let mut o: Vec<u32> = (0..p).collect();
+    for i in (1..o.len()).rev() {
+        o.swap(i, (rng.u64() % (i as u64 + 1)) as usize);
+    }
+    o
+}
+
+#[test]
+fn depth_is_bit_identical_to_serial_for_every_schedule() {
+    for p in 1..=16u32 {
+        for n in [1usize, 17, 255, 1001] {
+            let mut rng = Rng::new(p as u64 * 1000 + n as u64);
+            let images: Vec<Vec<DepthPixel>> = (0..p)
+                .map(|_| {
+                    partial(&mut rng, n, 0.5, |r| {
+                        DepthPixel::new((r.u64() % 8) as f32, r.u64() as u32)
+                    })
+                })
+                .collect();
+            let refs: Vec<&[DepthPixel]> = images.iter().map(|v| v.as_slice()).collect();
+            let serial = composite_serial(&refs);
+            let order = shuffled_order(p, n as u64);
+            for s in schedules(p) {
+                for sparse in [true, false] {
+                    let root = (n as u32) % p;
+                    let (img, _) = run(&images, &order, s, root, sparse);
+                    assert!(img == serial, "p {p} n {n} {s:?} sparse {sparse}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn over_is_within_tolerance_of_serial_front_to_back() {
+    let mut worst = 0.0f32;
+    for p in 1..=16u32 {
+        for n in [1usize, 33, 499] {
+            let mut rng = Rng::new(p as u64 * 7 + n as u64);
+            let images: Vec<Vec<RgbaF32>> = (0..p).map(|_| partial(&mut rng, n, 0.7, rgba)).collect();
+            // Visibility order: order[v] is the rank v-th from the viewer.
+            let order = shuffled_order(p, 99 + p as u64);
+            let in_order: Vec<&[RgbaF32]> = order.iter().map(|&r| images[r as usize].as_slice()).collect();
+            let serial = composite_serial(&in_order);
+            for s in schedules(p) {
+                let (img, _) = run(&images, &order, s, 0, true);
+                for (a, b) in img.iter().zip(&serial) {
+                    for c in 0..4 {
+                        let d = (a.0[c] - b.0[c]).abs();
+                        worst = worst.max(d);
+                        assert!(d <= OVER_F32_TOLERANCE, "p {p} n {n} {s:?}: {a:?} vs {b:?}");
+                    }
+                }
+            }
+        }
+    }
+    println!("over: largest difference from the serial reference {worst:e} (bound {OVER_F32_TOLERANCE:e})");
+}
+
+#[test]
+fn u8_over_is_within_one_step_per_round_of_serial() {
+    for p in [2u32, 3, 6, 8, 13] {
+        let n = 301;
+        let mut rng = Rng::new(p as u64);
+        let images: Vec<Vec<Rgba8>> = (0..p)
+            .map(|_| {
+                partial(&mut rng, n, 0.8, |r| {
+                    let a = (r.u64() % 256) as u32;
+                    let c = |r: &mut Rng| ((r.u64() % 256) as u32 * a / 255) as u8;
+                    Rgba8([c(r), c(r), c(r), a as u8])
+                })
+            })
+            .collect();
+        let order: Vec<u32> = (0..p).collect();
+        let refs: Vec<&[Rgba8]> = images.iter().map(|v| v.as_slice()).collect();
+        let serial = composite_serial(&refs);
+        for s in schedules(p) {
+            let (img, _) = run(&images, &order, s, 0, true);
+            for (a, b) in img.iter().zip(&serial) {
+                for c in 0..4 {
+                    let d = (a.0[c] as i32 - b.0[c] as i32).abs();
+                    assert!(d <= p as i32, "p {p} {s:?}: {a:?} vs {b:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn bytes_sent_within_n_one_minus_one_over_p() {
+    for p in 2..=16u32 {
+        let n = 4099usize; // odd and prime
+        let b = RgbaF32::BYTES as f64;
+        let mut rng = Rng::new(5);
+        let images: Vec<Vec<RgbaF32>> = (0..p).map(|_| partial(&mut rng, n, 1.0, rgba)).collect();
+        let order: Vec<u32> = (0..p).collect();
+        for s in schedules(p) {
+            let Schedule::RadixK(k) = s else { continue };
+            let (_, bytes) = run(&images, &order, s, 0, false);
+            let messages: u32 = k.as_slice().iter().map(|k| k - 1).sum();
+            // Headers: 12 bytes per dense message; uneven splits: one pixel per piece.
+            let slack = messages as f64 * 12.0 + k.as_slice().iter().sum::<u32>() as f64 * b;
+            let bound = n as f64 * (1.0 - 1.0 / p as f64) * b + slack;
+            for (r, &sent) in bytes.iter().enumerate() {
+                assert!(sent as f64 <= bound, "p {p} {k:?} rank {r}: {sent} > {bound}");
+            }
+        }
+    }
+}
+
+#[test]
+fn sparse_images_send_less() {
+    let p = 8;
+    let n = 10_000;
+    let mut rng = Rng::new(1);
+    // Each rank covers only its own contiguous tenth of the image, as a spatial partition does.
+    let images: Vec<Vec<DepthPixel>> = (0..p)
+        .map(|r| {
+            (0..n)
+                .map(|i| {
+                    if i / 1250 == r {
+                        DepthPixel::new(rng.f32(), 1)
+                    } else {
+                        DepthPixel::EMPTY
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let order: Vec<u32> = (0..p as u32).collect();
+    let s = Schedule::RadixK(KVec::binary_swap(8).unwrap());
+    let (dense_img, dense) = run(&images, &order, s, 0, false);
+    let (sparse_img, sparse) = run(&images, &order, s, 0, true);
+    assert_eq!(dense_img, sparse_img);
+    let (d, sp): (u64, u64) = (dense.iter().sum(), sparse.iter().sum());
+    assert!(sp * 3 < d, "sparse {sp} bytes vs dense {d}");
+}
+
+#[test]
+fn bad_plans_are_errors_not_panics() {
+    let out = ThreadTransport::run(3, |t| {
+        let img = vec![DepthPixel::EMPTY; 4];
+        let bad_order = [0, 0, 1];
+        let plan = Plan {
+            schedule: Schedule::RadixK(KVec::direct_send(3)),
+            order: &bad_order,
+            root: 0,
+            sparse: true,
+        };
+        let a = composite(t, &img, &plan).is_err();
+        let order = [0, 1, 2];
+        let plan = Plan {
+            schedule: Schedule::RadixK(KVec::new(&[2, 2]).unwrap()),
+            order: &order,
+            root: 0,
+            sparse: true,
+        };
+        let b = composite(t, &img, &plan).is_err();
+        let plan = Plan {
+            schedule: Schedule::Tree,
+            order: &order,
+            root: 7,
+            sparse: true,
+        };
+        let c = composite(t, &img, &plan).is_err();
+        a && b && c
+    });
+    assert!(out.iter().all(|&ok| ok));
+}
