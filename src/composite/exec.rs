@@ -18,7 +18,26 @@ pub trait Transport {
     /// that order, all with `tag`. When every rank calls it with matching lists it must not
     /// deadlock (send without blocking, or post the receives first).
     fn exchange(&mut self, tag: u32, sends: Vec<(u32, Vec<u8>)>, from: &[u32]) -> Result<Vec<Vec<u8>>, TransportError>;
+
+    /// Waits until every rank has called it (through rank 0, with empty messages and tag
+    /// [`BARRIER_TAG`]), so that timings after it measure compositing, not rendering imbalance.
+    fn barrier(&mut self) -> Result<(), TransportError> {
+        let (me, p) = (self.rank(), self.size());
+        if me == 0 {
+            let others: Vec<u32> = (1..p).collect();
+            self.exchange(BARRIER_TAG, Vec::new(), &others)?;
+            self.exchange(BARRIER_TAG + 1, others.iter().map(|&r| (r, Vec::new())).collect(), &[])?;
+        } else {
+            self.exchange(BARRIER_TAG, vec![(0, Vec::new())], &[])?;
+            self.exchange(BARRIER_TAG + 1, Vec::new(), &[0])?;
+        }
+        Ok(())
+    }
 }
+
+/// Tags from this value up are reserved for [`Transport::barrier`]; compositing uses small tags
+/// (the round number).
+pub const BARRIER_TAG: u32 = 0x7000;
 
 /// A transport failure (a peer went away, or MPI reported an error).
 #[derive(Clone, Debug, PartialEq, Eq)]
