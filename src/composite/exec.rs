@@ -283,6 +283,94 @@ fn owned_range(s: &Schedule, v: u32, n: u32) -> core::ops::Range<u32> {
     }
 }
 
+/// Measures the [`CostModel`] of this transport (`std`): latency and bandwidth from ping-pongs
+/// between ranks 0 and 1 (median of repeats), the blend rate from compositing on this rank; rank
+/// 0's figures are sent to every rank so that all choose the same k-vector. Every rank must call it.
+/// With one rank only the blend rate is measured (messages cost nothing).
+///
+/// ```
+/// use strahl::composite::{ThreadTransport, measure_cost_model};
+/// let models = ThreadTransport::run(2, |t| measure_cost_model(t).unwrap());
+/// assert_eq!(models[0], models[1]);
+/// assert!(models[0].latency > 0.0 && models[0].seconds_per_byte > 0.0);
+/// ```
+#[cfg(feature = "std")]
+pub fn measure_cost_model<T: Transport>(t: &mut T) -> Result<super::CostModel, TransportError> {
+    use std::time::Instant;
+    const TAG: u32 = BARRIER_TAG + 16;
+    let (me, p) = (t.rank(), t.size());
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    // Blend rate: 64 Ki RGBA f32 pixels composited a few times.
+    let mut acc = vec![super::RgbaF32([0.1, 0.2, 0.3, 0.5]); 1 << 16];
+    let other = vec![super::RgbaF32([0.3, 0.2, 0.1, 0.4]); 1 << 16];
+    let blend = median(
+        (0..5)
+            .map(|_| {
+                let t0 = Instant::now();
+                <super::RgbaF32 as Pixel>::composite_behind(&mut acc, &other);
+                t0.elapsed().as_secs_f64() / acc.len() as f64
+            })
+            .collect(),
+    );
+    let mut model = super::CostModel {
+        latency: 0.0,
+        seconds_per_byte: 0.0,
+        seconds_per_blend: blend,
+    };
+    if p < 2 {
+        return Ok(model);
+    }
+    // Ping-pong between ranks 0 and 1: round trips of `bytes`, median of `reps`.
+    let pingpong = |t: &mut T, bytes: usize, reps: usize| -> Result<f64, TransportError> {
+        let mut times = Vec::new();
+        for r in 0..reps as u32 {
+            let t0 = Instant::now();
+            if me == 0 {
+                t.exchange(TAG + 2 * r, vec![(1, vec![0u8; bytes])], &[])?;
+                t.exchange(TAG + 2 * r + 1, Vec::new(), &[1])?;
+            } else if me == 1 {
+                let got = t.exchange(TAG + 2 * r, Vec::new(), &[0])?;
+                t.exchange(TAG + 2 * r + 1, got.into_iter().map(|b| (0, b)).collect(), &[])?;
+            }
+            times.push(t0.elapsed().as_secs_f64() / 2.0);
+        }
+        Ok(median(times))
+    };
+    if me <= 1 {
+        let lat = pingpong(t, 0, 21)?;
+        let mib = 1 << 20;
+        let big = pingpong(t, mib, 5)?;
+        model.latency = lat.max(1e-9);
+        model.seconds_per_byte = ((big - lat) / mib as f64).max(1e-13);
+    }
+    // Rank 0's figures to everyone.
+    let tag = TAG + 100;
+    if me == 0 {
+        let bytes: Vec<u8> = [model.latency, model.seconds_per_byte, model.seconds_per_blend]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        t.exchange(tag, (1..p).map(|r| (r, bytes.clone())).collect(), &[])?;
+    } else {
+        let got = t.exchange(tag, Vec::new(), &[0])?;
+        let f = |i: usize| {
+            got[0]
+                .get(8 * i..8 * i + 8)
+                .map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8])))
+                .unwrap_or(0.0)
+        };
+        model = super::CostModel {
+            latency: f(0),
+            seconds_per_byte: f(1),
+            seconds_per_blend: f(2),
+        };
+    }
+    Ok(model)
+}
+
 /// The serial reference: `images` in visibility order (nearest first) composited front to back.
 pub fn composite_serial<P: Pixel>(images: &[&[P]]) -> Vec<P> {
     let n = images.iter().map(|i| i.len()).max().unwrap_or(0);

@@ -42,6 +42,8 @@ pub mod thread;
 #[cfg(feature = "std")]
 pub mod tiles;
 
+#[cfg(feature = "std")]
+pub use exec::measure_cost_model;
 #[cfg(feature = "alloc")]
 pub use exec::{
     CompositeError, CompositeStats, Plan, Schedule, Transport, TransportError, composite, composite_serial,
