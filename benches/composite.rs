@@ -146,6 +146,19 @@ fn tile_queue(c: &mut Criterion) {
         ("static_bands", Assignment::Static),
         ("dynamic_queue", Assignment::Dynamic),
     ] {
+        let stats = render_tiles(W as u32, H as u32, 32, 2, a, |t, out: &mut [f32]| {
+            let w = t.x1 - t.x0;
+            for (i, p) in out.iter_mut().enumerate() {
+                *p = skewed(t.x0 + i as u32 % w, t.y0 + i as u32 / w);
+            }
+        })
+        .1;
+        println!(
+            "tile_queue/{name}: tiles per thread {:?}, busy ms {:?}, imbalance (max/mean busy) {:.2}",
+            stats.tiles_per_thread,
+            stats.busy_seconds.iter().map(|s| (s * 1e3).round()).collect::<Vec<_>>(),
+            stats.imbalance()
+        );
         g.bench_function(name, |b| {
             b.iter(|| {
                 render_tiles(W as u32, H as u32, 32, 2, a, |t, out: &mut [f32]| {
