@@ -33,8 +33,8 @@
 //! ## Features
 //! | feature | default | what it adds |
 //! |---|---|---|
-//! | (none) | | all kernels: slab test, triangle tests, Morton codes, on caller-provided slices; `#![no_std]`, no allocation |
-//! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); later the BVH builders |
+//! | (none) | | all kernels: slab test, triangle tests, Morton codes, volume marching, on caller-provided slices; `#![no_std]`, no allocation |
+//! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); [`volume::MacrocellGrid::build`] in a `Vec`; later the BVH builders |
 //! | `std` | yes | `alloc`, plus std's float intrinsics in `glam`; threads ([`composite::ThreadTransport`], [`composite::render_tiles`]) |
 //! | `mpi` | | [`composite`]'s `MpiTransport` over the system's MPI library (`libopenmpi-dev`, `libclang-dev`) |
 //!
@@ -43,6 +43,9 @@
 //! |---|---|---|
 //! | slab test | conservative far bound `far + \|far\| 2 gamma(3)` | [`intersect::aabb::FAR_SLACK`] |
 //! | Morton codes | bits per axis (10 or 21), quantisation bounds | [`geometry::morton::MortonQuantizer`] |
+//! | volume marching | step, endpoint / midpoint sampling, early-termination epsilon, step cap | [`volume::MarchParams`] (`reference`, `quality`, `fast`) |
+//! | transfer function | table, scalar range, reference step of authored opacities | [`volume::TransferFunction`], [`volume::TfEntry::from_rgba_premultiplied`] |
+//! | empty-space skipping | macrocell block size | [`volume::GridParams`] (`fine`, default, `coarse`) |
 //! | compositing | k-vector, visibility order, sparse encoding, root | [`composite::Plan`], [`composite::auto_kvec`] with [`composite::CostModel`] |
 //! | SIMD width | `wide` picks AVX / SSE / NEON from target features | build with `-C target-cpu=native` |
 //!
@@ -64,6 +67,7 @@ pub mod intersect;
 pub mod math;
 #[cfg(feature = "alloc")]
 pub mod scene;
+pub mod volume;
 
 pub use geometry::{Aabb, Hit, Ray};
 pub use glam::Vec3;

@@ -1,0 +1,500 @@
+//! Structured volumes: voxels on a regular grid, borrowed zero-copy, and trilinear sampling.
+
+use super::VolumeError;
+use crate::geometry::Aabb;
+use crate::math::{Lane, f32x8, i32x8, max_l, min_l};
+use bytemuck::Pod;
+use glam::Vec3;
+
+/// A voxel type: plain old data that converts to `f32` exactly (`u8`, `u16`) or is `f32`.
+///
+/// Voxels are read in the machine's byte order (they are cast, not parsed).
+pub trait Voxel: Pod + Send + Sync + 'static {
+    /// The value as `f32`.
+    fn to_f32(self) -> f32;
+}
+
+impl Voxel for u8 {
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
+}
+
+impl Voxel for u16 {
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
+}
+
+impl Voxel for f32 {
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self
+    }
+}
+
+/// A structured volume: `nx * ny * nz` voxels, x fastest, borrowed from the caller.
+///
+/// # Geometry
+/// Voxel `(i, j, k)` is a sample of the field at world point `origin + (i, j, k) * spacing` (voxels
+/// are points, as in VTK image data), so the volume's [`bounds`](Self::bounds) run from `origin`
+/// to `origin + (dims - 1) * spacing`. *Local* (voxel) coordinates are
+/// `g = (p - origin) / spacing`; voxel `(i, j, k)` sits at `g = (i, j, k)`.
+///
+/// # Sampling
+/// Trilinear interpolation of the 8 voxels around `g`, after clamping `g` to the box (clamp to
+/// edge; a NaN coordinate reads as 0). Each axis interpolates as `a + (b - a) f`, x first, then y,
+/// then z, in every width, so [`sample_local_scalar`](Self::sample_local_scalar) and
+/// [`sample_local_x8`](Self::sample_local_x8) agree bit for bit. A linear field is reproduced up to
+/// rounding. An axis with one voxel is constant along it; an empty volume (a zero dimension) samples
+/// as `0` and its box is empty.
+///
+/// ```
+/// use strahl::Vec3;
+/// use strahl::volume::Volume;
+/// // 2 x 1 x 1 voxels of u16, from bytes (machine byte order), 0.5 apart along x.
+/// let data: [u16; 2] = [100, 300];
+/// let bytes: &[u8] = bytemuck::cast_slice(&data);
+/// let v = Volume::<u16>::from_bytes(bytes, [2, 1, 1], Vec3::new(0.5, 1.0, 1.0), Vec3::ZERO).unwrap();
+/// assert_eq!(v.bounds().max, Vec3::new(0.5, 0.0, 0.0));
+/// assert_eq!(v.sample_scalar(Vec3::new(0.125, 0.0, 0.0)), 150.0);
+/// assert_eq!(v.sample_scalar(Vec3::new(9.0, 0.0, 0.0)), 300.0); // clamped to the box
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct Volume<'a, V: Voxel> {
+    data: &'a [V],
+    dims: [u32; 3],
+    spacing: Vec3,
+    origin: Vec3,
+    inv_spacing: Vec3,
+    /// `dims - 1` per axis, as `f32`: the clamp for local coordinates.
+    gmax: [f32; 3],
+    /// `max(dims - 2, 0)` per axis: the last cell index.
+    cmax: [i32; 3],
+    /// Index strides of x, y, z.
+    stride: [i32; 3],
+    /// Offset to the next voxel per axis: the stride, or 0 on an axis with one voxel.
+    next: [i32; 3],
+}
+
+/// Cell of one sample: the linear index of its lowest voxel and the fractions along each axis.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Cell {
+    pub base: usize,
+    pub idx: [i32; 3],
+    pub frac: [f32; 3],
+}
+
+/// Cells of eight samples.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CellX8 {
+    pub base: [i32; 8],
+    pub idx: [[i32; 8]; 3],
+    pub frac: [f32x8; 3],
+}
+
+#[inline(always)]
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    a + (b - a) * t
+}
+
+#[inline(always)]
+fn lerp8(a: f32x8, b: f32x8, t: f32x8) -> f32x8 {
+    a + (b - a) * t
+}
+
+impl<'a, V: Voxel> Volume<'a, V> {
+    /// Most voxels a volume may have: `2^31 - 1`, so voxel indices fit the `i32` lanes.
+    pub const MAX_VOXELS: usize = i32::MAX as usize;
+
+    /// A volume over `data` (x fastest, then y, then z).
+    ///
+    /// Errors: [`VolumeError::TooLarge`] if `nx ny nz` overflows or exceeds
+    /// [`MAX_VOXELS`](Self::MAX_VOXELS); [`VolumeError::SizeMismatch`] if `data.len()` differs from
+    /// it; [`VolumeError::InvalidGeometry`] unless `spacing` is finite and positive and `origin`
+    /// finite. Zero dimensions with empty `data` make a valid, empty volume.
+    pub fn new(data: &'a [V], dims: [u32; 3], spacing: Vec3, origin: Vec3) -> Result<Self, VolumeError> {
+        let n = Self::voxel_count(dims)?;
+        if data.len() != n {
+            return Err(VolumeError::SizeMismatch {
+                expected: n,
+                actual: data.len(),
+            });
+        }
+        if !(spacing.is_finite() && spacing.cmpgt(Vec3::ZERO).all() && origin.is_finite()) {
+            return Err(VolumeError::InvalidGeometry);
+        }
+        let (nx, ny) = (dims[0] as i32, dims[1] as i32);
+        let stride = [1, nx, nx * ny];
+        Ok(Self {
+            data,
+            dims,
+            spacing,
+            origin,
+            inv_spacing: Vec3::ONE / spacing,
+            gmax: dims.map(|d| d.saturating_sub(1) as f32),
+            cmax: dims.map(|d| d.saturating_sub(2) as i32),
+            stride,
+            next: core::array::from_fn(|a| if dims[a] > 1 { stride[a] } else { 0 }),
+        })
+    }
+
+    /// A volume over raw bytes, without copying: the bytes are cast to voxels with `bytemuck`.
+    ///
+    /// Errors as [`new`](Self::new), plus [`VolumeError::Misaligned`] if `bytes` is not aligned for
+    /// `V`, and [`VolumeError::SizeMismatch`] (in bytes) if its length is not `nx ny nz size_of::<V>()`.
+    ///
+    /// ```
+    /// use strahl::Vec3;
+    /// use strahl::volume::{Volume, VolumeError};
+    /// let words = [0u32; 3]; // 4-aligned storage
+    /// let bytes: &[u8] = bytemuck::cast_slice(&words);
+    /// assert!(Volume::<f32>::from_bytes(&bytes[..8], [2, 1, 1], Vec3::ONE, Vec3::ZERO).is_ok());
+    /// let err = Volume::<f32>::from_bytes(&bytes[1..9], [2, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap_err();
+    /// assert_eq!(err, VolumeError::Misaligned { required: 4 });
+    /// ```
+    pub fn from_bytes(bytes: &'a [u8], dims: [u32; 3], spacing: Vec3, origin: Vec3) -> Result<Self, VolumeError> {
+        let n = Self::voxel_count(dims)?;
+        let size = core::mem::size_of::<V>();
+        let expected = n.checked_mul(size).ok_or(VolumeError::TooLarge)?;
+        if bytes.len() != expected {
+            return Err(VolumeError::SizeMismatch {
+                expected,
+                actual: bytes.len(),
+            });
+        }
+        let data: &[V] = bytemuck::try_cast_slice(bytes).map_err(|e| match e {
+            bytemuck::PodCastError::TargetAlignmentGreaterAndInputNotAligned
+            | bytemuck::PodCastError::AlignmentMismatch => VolumeError::Misaligned {
+                required: core::mem::align_of::<V>(),
+            },
+            _ => VolumeError::SizeMismatch {
+                expected,
+                actual: bytes.len(),
+            },
+        })?;
+        Self::new(data, dims, spacing, origin)
+    }
+
+    fn voxel_count(dims: [u32; 3]) -> Result<usize, VolumeError> {
+        let n = (dims[0] as usize)
+            .checked_mul(dims[1] as usize)
+            .and_then(|n| n.checked_mul(dims[2] as usize))
+            .ok_or(VolumeError::TooLarge)?;
+        if n > Self::MAX_VOXELS {
+            return Err(VolumeError::TooLarge);
+        }
+        Ok(n)
+    }
+
+    /// The voxels, x fastest.
+    #[inline]
+    pub fn data(&self) -> &'a [V] {
+        self.data
+    }
+
+    /// Number of voxels per axis.
+    #[inline]
+    pub fn dims(&self) -> [u32; 3] {
+        self.dims
+    }
+
+    /// World distance between neighbouring voxels, per axis.
+    #[inline]
+    pub fn spacing(&self) -> Vec3 {
+        self.spacing
+    }
+
+    /// World position of voxel `(0, 0, 0)`.
+    #[inline]
+    pub fn origin(&self) -> Vec3 {
+        self.origin
+    }
+
+    /// `true` for a volume without voxels.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    /// The box spanned by the voxel centres, `origin ..= origin + (dims - 1) spacing`; empty for an
+    /// empty volume.
+    pub fn bounds(&self) -> Aabb {
+        if self.is_empty() {
+            return Aabb::EMPTY;
+        }
+        let g = Vec3::from_array(self.gmax);
+        Aabb::new(self.origin, self.origin + g * self.spacing)
+    }
+
+    /// Voxel `(i, j, k)`, or `None` outside the grid.
+    pub fn voxel(&self, i: u32, j: u32, k: u32) -> Option<V> {
+        if i >= self.dims[0] || j >= self.dims[1] || k >= self.dims[2] {
+            return None;
+        }
+        let idx = i as usize + j as usize * self.stride[1] as usize + k as usize * self.stride[2] as usize;
+        self.data.get(idx).copied()
+    }
+
+    /// Local (voxel) coordinates of world point `p`: `(p - origin) / spacing`.
+    #[inline]
+    pub fn to_local(&self, p: Vec3) -> Vec3 {
+        (p - self.origin) * self.inv_spacing
+    }
+
+    /// `(origin, 1 / spacing)`: local = `(world - origin) * (1 / spacing)`.
+    #[inline]
+    pub fn local_frame(&self) -> (Vec3, Vec3) {
+        (self.origin, self.inv_spacing)
+    }
+
+    /// Trilinear sample at world point `p` (clamped to the box); `0` for an empty volume.
+    #[inline]
+    pub fn sample_scalar(&self, p: Vec3) -> f32 {
+        self.sample_local_scalar(self.to_local(p))
+    }
+
+    /// Trilinear samples at eight world points (SoA); lane `i` equals [`sample_scalar`](Self::sample_scalar)
+    /// of lane `i`'s point bit for bit.
+    #[inline]
+    pub fn sample_x8(&self, p: [f32x8; 3]) -> f32x8 {
+        let o = self.origin;
+        let s = self.inv_spacing;
+        self.sample_local_x8([
+            (p[0] - f32x8::splat(o.x)) * f32x8::splat(s.x),
+            (p[1] - f32x8::splat(o.y)) * f32x8::splat(s.y),
+            (p[2] - f32x8::splat(o.z)) * f32x8::splat(s.z),
+        ])
+    }
+
+    /// Trilinear sample at local coordinates `g` (clamped to `[0, dims - 1]`); `0` for an empty
+    /// volume.
+    #[inline]
+    pub fn sample_local_scalar(&self, g: Vec3) -> f32 {
+        if self.data.is_empty() {
+            return 0.0;
+        }
+        self.interp_scalar(&self.cell_scalar(g))
+    }
+
+    /// Trilinear samples at eight local points; bit-identical to
+    /// [`sample_local_scalar`](Self::sample_local_scalar) per lane.
+    ///
+    /// ```
+    /// use strahl::{Vec3, math::f32x8};
+    /// use strahl::volume::Volume;
+    /// let data: Vec<f32> = (0..27).map(|i| (i * i % 7) as f32).collect();
+    /// let v = Volume::new(&data, [3, 3, 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let xs = [0.1, 0.5, 1.0, 1.7, 2.0, -1.0, 3.5, f32::NAN];
+    /// let g = [f32x8::new(xs), f32x8::splat(0.3), f32x8::splat(1.9)];
+    /// let s = v.sample_local_x8(g).to_array();
+    /// for i in 0..8 {
+    ///     assert_eq!(s[i].to_bits(), v.sample_local_scalar(Vec3::new(xs[i], 0.3, 1.9)).to_bits());
+    /// }
+    /// ```
+    #[inline]
+    pub fn sample_local_x8(&self, g: [f32x8; 3]) -> f32x8 {
+        if self.data.is_empty() {
+            return f32x8::splat(0.0);
+        }
+        self.interp_x8(&self.cell_x8(g))
+    }
+
+    /// Clamps `g` to the box and finds its cell. Needs a non-empty volume.
+    #[inline(always)]
+    pub(crate) fn cell_scalar(&self, g: Vec3) -> Cell {
+        let mut idx = [0i32; 3];
+        let mut frac = [0.0f32; 3];
+        for a in 0..3 {
+            // NaN -> 0 (max_l returns its second operand on NaN).
+            let gc = min_l(max_l(g[a], 0.0), self.gmax[a]);
+            let i = (gc as i32).min(self.cmax[a]);
+            idx[a] = i;
+            frac[a] = gc - i as f32;
+        }
+        let base = idx[0] + idx[1] * self.stride[1] + idx[2] * self.stride[2];
+        Cell {
+            base: base as usize,
+            idx,
+            frac,
+        }
+    }
+
+    /// Eight cells at once; lane `i` as [`cell_scalar`](Self::cell_scalar).
+    #[inline(always)]
+    pub(crate) fn cell_x8(&self, g: [f32x8; 3]) -> CellX8 {
+        let mut idx = [[0i32; 8]; 3];
+        let mut frac = [f32x8::splat(0.0); 3];
+        let mut base = i32x8::splat(0);
+        for a in 0..3 {
+            let gc = g[a].max_l(f32x8::splat(0.0)).min_l(f32x8::splat(self.gmax[a]));
+            // gc >= 0 and not NaN, so truncation is the floor, as `as i32` in the scalar form.
+            let i = gc.trunc_int().min(i32x8::splat(self.cmax[a]));
+            frac[a] = gc - i.round_float();
+            base += i * i32x8::splat(self.stride[a]);
+            idx[a] = i.to_array();
+        }
+        CellX8 {
+            base: base.to_array(),
+            idx,
+            frac,
+        }
+    }
+
+    /// Trilinear interpolation in a cell: x, then y, then z.
+    #[inline(always)]
+    pub(crate) fn interp_scalar(&self, c: &Cell) -> f32 {
+        let [ox, oy, oz] = self.next.map(|o| o as usize);
+        let d = self.data;
+        let b = c.base;
+        let v = |i: usize| d[i].to_f32();
+        let [fx, fy, fz] = c.frac;
+        let c00 = lerp(v(b), v(b + ox), fx);
+        let c10 = lerp(v(b + oy), v(b + oy + ox), fx);
+        let c01 = lerp(v(b + oz), v(b + oz + ox), fx);
+        let c11 = lerp(v(b + oz + oy), v(b + oz + oy + ox), fx);
+        let c0 = lerp(c00, c10, fy);
+        let c1 = lerp(c01, c11, fy);
+        lerp(c0, c1, fz)
+    }
+
+    /// Eight trilinear interpolations; the voxel loads are scalar (a gather), the arithmetic 8-wide.
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // lane l of eight arrays
+    pub(crate) fn interp_x8(&self, c: &CellX8) -> f32x8 {
+        let [ox, oy, oz] = self.next.map(|o| o as usize);
+        let d = self.data;
+        // PERF: 64 scalar loads, in x-adjacent pairs (one bounds check per pair) where the volume
+        // has more than one voxel along x; AVX2's gather instruction is no faster here.
+        let mut v = [[0.0f32; 8]; 8];
+        let pair = |i: usize| match d.get(i..i + 2) {
+            Some(&[a, b]) => (a.to_f32(), b.to_f32()),
+            _ => (0.0, 0.0), // unreachable: the cell's voxels are inside the grid
+        };
+        for l in 0..8 {
+            let b = c.base[l] as usize;
+            if ox == 1 {
+                (v[0][l], v[1][l]) = pair(b);
+                (v[2][l], v[3][l]) = pair(b + oy);
+                (v[4][l], v[5][l]) = pair(b + oz);
+                (v[6][l], v[7][l]) = pair(b + oz + oy);
+            } else {
+                v[0][l] = d[b].to_f32();
+                v[1][l] = d[b + ox].to_f32();
+                v[2][l] = d[b + oy].to_f32();
+                v[3][l] = d[b + oy + ox].to_f32();
+                v[4][l] = d[b + oz].to_f32();
+                v[5][l] = d[b + oz + ox].to_f32();
+                v[6][l] = d[b + oz + oy].to_f32();
+                v[7][l] = d[b + oz + oy + ox].to_f32();
+            }
+        }
+        let v = v.map(f32x8::new);
+        let [fx, fy, fz] = c.frac;
+        let c00 = lerp8(v[0], v[1], fx);
+        let c10 = lerp8(v[2], v[3], fx);
+        let c01 = lerp8(v[4], v[5], fx);
+        let c11 = lerp8(v[6], v[7], fx);
+        let c0 = lerp8(c00, c10, fy);
+        let c1 = lerp8(c01, c11, fy);
+        lerp8(c0, c1, fz)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn construction_errors() {
+        let d = [0u8; 8];
+        assert!(Volume::new(&d, [2, 2, 2], Vec3::ONE, Vec3::ZERO).is_ok());
+        assert_eq!(
+            Volume::new(&d, [2, 2, 3], Vec3::ONE, Vec3::ZERO).unwrap_err(),
+            VolumeError::SizeMismatch {
+                expected: 12,
+                actual: 8
+            }
+        );
+        for bad in [
+            Vec3::ZERO,
+            Vec3::new(1.0, -1.0, 1.0),
+            Vec3::splat(f32::NAN),
+            Vec3::INFINITY,
+        ] {
+            assert_eq!(
+                Volume::new(&d, [2, 2, 2], bad, Vec3::ZERO).unwrap_err(),
+                VolumeError::InvalidGeometry
+            );
+        }
+        assert_eq!(
+            Volume::new(&d, [2, 2, 2], Vec3::ONE, Vec3::splat(f32::NAN)).unwrap_err(),
+            VolumeError::InvalidGeometry
+        );
+        assert_eq!(
+            Volume::<u8>::new(&[], [u32::MAX, u32::MAX, 2], Vec3::ONE, Vec3::ZERO).unwrap_err(),
+            VolumeError::TooLarge
+        );
+        assert_eq!(
+            Volume::<u8>::new(&[], [65536, 65536, 1], Vec3::ONE, Vec3::ZERO).unwrap_err(),
+            VolumeError::TooLarge
+        );
+        let words = [0u16; 5];
+        let bytes: &[u8] = bytemuck::cast_slice(&words);
+        assert_eq!(
+            Volume::<u16>::from_bytes(&bytes[1..9], [2, 2, 1], Vec3::ONE, Vec3::ZERO).unwrap_err(),
+            VolumeError::Misaligned { required: 2 }
+        );
+        assert_eq!(
+            Volume::<u16>::from_bytes(&bytes[..7], [2, 2, 1], Vec3::ONE, Vec3::ZERO).unwrap_err(),
+            VolumeError::SizeMismatch { expected: 8, actual: 7 }
+        );
+    }
+
+    #[test]
+    fn empty_volume_samples_zero() {
+        let v = Volume::<f32>::new(&[], [0, 4, 4], Vec3::ONE, Vec3::ZERO).unwrap();
+        assert!(v.is_empty());
+        assert!(v.bounds().is_empty());
+        assert_eq!(v.sample_scalar(Vec3::ZERO), 0.0);
+        assert_eq!(v.sample_x8([f32x8::splat(0.5); 3]).to_array(), [0.0; 8]);
+        assert_eq!(v.voxel(0, 0, 0), None);
+    }
+
+    #[test]
+    fn linear_field_is_reproduced() {
+        // f = 1 + 2x - 3y + 0.5z on a 5 x 4 x 3 grid with spacing 0.5 (exact in f32).
+        let dims = [5u32, 4, 3];
+        let sp = Vec3::splat(0.5);
+        let f = |p: Vec3| 1.0 + 2.0 * p.x - 3.0 * p.y + 0.5 * p.z;
+        let mut data = [0.0f32; 60];
+        for k in 0..3 {
+            for j in 0..4 {
+                for i in 0..5 {
+                    data[i + 5 * j + 20 * k] = f(Vec3::new(i as f32, j as f32, k as f32) * sp);
+                }
+            }
+        }
+        let v = Volume::new(&data, dims, sp, Vec3::ZERO).unwrap();
+        for s in 0..200 {
+            let p = Vec3::new(
+                (s * 37 % 200) as f32 / 100.0,
+                (s * 11 % 150) as f32 / 100.0,
+                (s * 7 % 100) as f32 / 100.0,
+            );
+            assert!((v.sample_scalar(p) - f(p)).abs() < 1e-5, "{p}");
+        }
+    }
+
+    #[test]
+    fn single_voxel_axes() {
+        let data = [3.0f32, 5.0];
+        let v = Volume::new(&data, [2, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+        assert_eq!(v.sample_local_scalar(Vec3::new(0.5, 7.0, -3.0)), 4.0);
+        let one = Volume::new(&data[..1], [1, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+        assert_eq!(one.sample_local_scalar(Vec3::new(0.5, 0.5, 0.5)), 3.0);
+        assert_eq!(one.bounds(), Aabb::new(Vec3::ZERO, Vec3::ZERO));
+    }
+}

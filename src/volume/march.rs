@@ -1,0 +1,592 @@
+//! The integrator: fixed-step front-to-back ray marching, scalar reference and 8 rays at once.
+
+use super::exp::{one_minus_exp_neg_scalar, one_minus_exp_neg_x8};
+use super::medium::{EmptyRegion, Lookup, Medium};
+use super::{Rgba, VolumeError};
+use crate::geometry::{Aabb, Ray};
+use crate::math::{Lane, abs, f32x8, max_l, min_l, sign_bit};
+use glam::Vec3;
+
+/// Default [`MarchParams::max_steps`]: `2^16` samples per ray, enough for a step of a quarter
+/// voxel across the diagonal of a `9000^3` volume.
+pub const DEFAULT_MAX_STEPS: u32 = 1 << 16;
+
+/// Largest [`MarchParams::max_steps`]: `2^24`, so that every step index is exact in `f32`.
+pub const MAX_STEPS_LIMIT: u32 = 1 << 24;
+
+/// Where each step takes its sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Sampling {
+    /// At the start of the step, `t_k = k dt`: a left Riemann sum, first order in `dt`.
+    Endpoint,
+    /// In the middle of the step, `t_k + h_k / 2`: the midpoint rule, second order in `dt`.
+    #[default]
+    Midpoint,
+}
+
+/// The knobs of the marcher, in one place.
+///
+/// | field | meaning | presets |
+/// |---|---|---|
+/// | [`step`](Self::step) | `dt`, world units | the argument of every preset; half the voxel spacing or less for a band-limited volume |
+/// | [`sampling`](Self::sampling) | [`Sampling::Endpoint`] or [`Sampling::Midpoint`] | midpoint in all presets |
+/// | [`termination`](Self::termination) | early ray termination: stop once `1 - A <= eps` | `reference`: off, `quality`: `Some(0.0)` (exact), `fast`: `Some(1/256)` |
+/// | [`max_steps`](Self::max_steps) | samples per ray at most | [`DEFAULT_MAX_STEPS`] |
+///
+/// ```
+/// use strahl::volume::{MarchParams, Sampling, VolumeError};
+/// let p = MarchParams::fast(0.5);
+/// assert_eq!((p.step, p.sampling, p.termination), (0.5, Sampling::Midpoint, Some(1.0 / 256.0)));
+/// assert!(p.validate().is_ok());
+/// for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+///     assert_eq!(MarchParams::reference(bad).validate(), Err(VolumeError::InvalidStep));
+/// }
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MarchParams {
+    /// Step length `dt` in world units (finite, `> 0`).
+    pub step: f32,
+    /// Where a step takes its sample.
+    pub sampling: Sampling,
+    /// `None`: march every ray to its end. `Some(eps)`, `eps` in `[0, 1)`: stop a ray once its
+    /// transmittance `1 - A` is at most `eps`; this changes each colour channel by at most
+    /// `eps max|c|` and `A` by at most `eps`. `Some(0.0)` stops only at `A == 1` and is exact (the
+    /// image is bit-identical to `None`); `A` rounds to exactly 1 in opaque media (steps with
+    /// opacity above 1/2 near the end), while in thin media it can settle at `1 - 2^-24`, and then
+    /// `Some(0.0)` never stops a ray early.
+    pub termination: Option<f32>,
+    /// Samples per ray at most, in `1..=MAX_STEPS_LIMIT`. A ray that would need more is marched
+    /// over its first `max_steps` steps only and counted in [`MarchStats::truncated`].
+    pub max_steps: u32,
+}
+
+impl MarchParams {
+    /// The reference: midpoint sampling, no early termination.
+    pub const fn reference(step: f32) -> Self {
+        Self {
+            step,
+            sampling: Sampling::Midpoint,
+            termination: None,
+            max_steps: DEFAULT_MAX_STEPS,
+        }
+    }
+
+    /// Midpoint sampling, termination at full opacity only: the same image as
+    /// [`reference`](Self::reference), faster on opaque volumes.
+    pub const fn quality(step: f32) -> Self {
+        Self {
+            termination: Some(0.0),
+            ..Self::reference(step)
+        }
+    }
+
+    /// Midpoint sampling, termination at `1 - A <= 1/256`: an error of at most `max|c| / 256` per
+    /// channel, below the resolution of an 8-bit image.
+    pub const fn fast(step: f32) -> Self {
+        Self {
+            termination: Some(1.0 / 256.0),
+            ..Self::reference(step)
+        }
+    }
+
+    /// Checks every field: [`VolumeError::InvalidStep`], [`VolumeError::InvalidTermination`],
+    /// [`VolumeError::InvalidMaxSteps`].
+    pub fn validate(&self) -> Result<(), VolumeError> {
+        if !(self.step > 0.0 && self.step.is_finite()) {
+            return Err(VolumeError::InvalidStep);
+        }
+        if let Some(eps) = self.termination
+            && !(0.0..1.0).contains(&eps)
+        {
+            return Err(VolumeError::InvalidTermination);
+        }
+        if self.max_steps == 0 || self.max_steps > MAX_STEPS_LIMIT {
+            return Err(VolumeError::InvalidMaxSteps);
+        }
+        Ok(())
+    }
+}
+
+/// Counters of one call of [`integrate_scalar`] / [`integrate_x8`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MarchStats {
+    /// Rays that overlap the medium with positive length (the others are transparent at no cost).
+    pub rays: u64,
+    /// Samples taken (looked up and composited).
+    pub samples: u64,
+    /// Lattice samples jumped over by empty-space skipping.
+    pub skipped: u64,
+    /// Rays stopped by early termination before their end.
+    pub terminated: u64,
+    /// Rays cut at [`MarchParams::max_steps`].
+    pub truncated: u64,
+}
+
+/// One ray's part inside the medium, in local coordinates: `g(s) = ge + gd s` for `s` in
+/// `[0, len]` world units, marched in `n` steps.
+#[derive(Clone, Copy, Debug, Default)]
+struct Span {
+    ge: [f32; 3],
+    gd: [f32; 3],
+    /// `1 / gd`, for the exit distances of skipped regions.
+    inv_gd: [f32; 3],
+    len: f32,
+    n: u32,
+    truncated: bool,
+}
+
+/// What every ray of a call shares.
+struct Ctx {
+    bounds: Aabb,
+    diag: f32,
+    origin: Vec3,
+    scale: Vec3,
+    dt: f32,
+    inv_dt: f32,
+    mid: bool,
+    /// Keep marching while `A < thr`; `+inf` without termination.
+    thr: f32,
+    max_steps: u32,
+}
+
+impl Ctx {
+    fn new<M: Medium>(m: &M, p: &MarchParams) -> Result<Self, VolumeError> {
+        p.validate()?;
+        let bounds = m.bounds();
+        let (origin, scale) = m.local_frame();
+        let diag = if bounds.is_empty() {
+            0.0
+        } else {
+            bounds.extent().length()
+        };
+        Ok(Self {
+            bounds,
+            diag,
+            origin,
+            scale,
+            dt: p.step,
+            inv_dt: 1.0 / p.step,
+            mid: p.sampling == Sampling::Midpoint,
+            thr: p.termination.map_or(f32::INFINITY, |eps| 1.0 - eps),
+            max_steps: p.max_steps,
+        })
+    }
+
+    /// Clips `ray` to the medium's box and sets up its lattice; `None` if nothing is left.
+    fn span(&self, ray: &Ray) -> Option<Span> {
+        if !ray.is_valid() || self.bounds.is_empty() {
+            return None;
+        }
+        // Unit direction without overflow or underflow: divide by the largest component first.
+        let d = ray.direction;
+        let m = max_l(max_l(abs(d.x), abs(d.y)), abs(d.z));
+        let dn = d / m;
+        let l = dn.length();
+        let u = dn / l;
+        let dlen = m * l;
+        if !(dlen.is_finite() && dlen > 0.0) {
+            return None;
+        }
+        // Slab test in world distance along u (not widened: the marcher only needs where to start).
+        let (o, b) = (ray.origin, &self.bounds);
+        let mut near = ray.tmin * dlen;
+        let mut far = ray.tmax * dlen;
+        for a in (0..3).rev() {
+            let inv = 1.0 / u[a];
+            let (lo, hi) = if sign_bit(u[a]) {
+                (b.max[a], b.min[a])
+            } else {
+                (b.min[a], b.max[a])
+            };
+            near = max_l((lo - o[a]) * inv, near);
+            far = min_l((hi - o[a]) * inv, far);
+        }
+        if !(near < far && near.is_finite() && far.is_finite()) {
+            return None;
+        }
+        // March from the entry point, so a far-away origin costs no precision in t; a segment
+        // inside a box is never longer than its diagonal (this bounds rounding in far - near).
+        let entry = (o + u * near).max(b.min).min(b.max);
+        let len = min_l(far - near, self.diag);
+        if len.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+            return None;
+        }
+        let ge = ((entry - self.origin) * self.scale).to_array();
+        let gd = (u * self.scale).to_array();
+        let q = len / self.dt;
+        let (n, truncated) = if q <= self.max_steps as f32 {
+            (libm::ceilf(q) as u32, false)
+        } else {
+            (self.max_steps, true)
+        };
+        if n == 0 {
+            // len / dt underflowed: nothing to march.
+            return None;
+        }
+        Some(Span {
+            ge,
+            gd,
+            inv_gd: gd.map(|d| 1.0 / d),
+            len,
+            n,
+            truncated,
+        })
+    }
+
+    /// Local position and length of step `k` (the one formula both widths use).
+    #[inline(always)]
+    fn position(&self, sp: &Span, k: u32) -> ([f32; 3], f32) {
+        let s0 = k as f32 * self.dt;
+        let h = max_l(min_l(self.dt, sp.len - s0), 0.0);
+        let s = if self.mid { s0 + 0.5 * h } else { s0 };
+        (
+            [
+                sp.ge[0] + sp.gd[0] * s,
+                sp.ge[1] + sp.gd[1] * s,
+                sp.ge[2] + sp.gd[2] * s,
+            ],
+            h,
+        )
+    }
+
+    /// Sample `k`, at local position `g`, lies in the empty region `r`: the next step index to
+    /// look at. Jumps to the first lattice sample past `r.exit` if the last sample jumped over
+    /// lies in `r.safe` (then all do: positions are monotone in `k`), else just past `k`.
+    #[inline]
+    fn jump(&self, sp: &Span, k: u32, g: [f32; 3], r: &EmptyRegion) -> u32 {
+        let mut s_exit = f32::INFINITY;
+        for a in 0..3 {
+            let d = sp.gd[a];
+            let bound = if d > 0.0 {
+                r.exit.max[a]
+            } else if d < 0.0 {
+                r.exit.min[a]
+            } else {
+                continue;
+            };
+            // Only a guess (checked below), so the reciprocal will do.
+            s_exit = min_l((bound - sp.ge[a]) * sp.inv_gd[a], s_exit);
+        }
+        // Sample positions are k dt (endpoint) or k dt + dt / 2 (midpoint, full steps).
+        let q = s_exit * self.inv_dt - if self.mid { 0.5 } else { 0.0 };
+        let kn = if q < sp.n as f32 { libm::ceilf(q) as u32 } else { sp.n };
+        let kn = kn.clamp(k + 1, sp.n.max(k + 1));
+        if kn > k + 1 {
+            let inside = |g: [f32; 3]| r.safe.contains_point(Vec3::from_array(g));
+            if !(inside(g) && inside(self.position(sp, kn - 1).0)) {
+                return k + 1;
+            }
+        }
+        kn
+    }
+
+    /// Jumps over empty regions from sample `k` (in region `r`, at `g`) until a sample outside
+    /// any, or the end; returns its index. Each jump is checked as in [`jump`](Self::jump).
+    fn skip<M: Medium>(&self, m: &M, sp: &Span, k: u32, g: [f32; 3], r: &EmptyRegion) -> u32 {
+        let (mut k, mut g, mut r) = (k, g, *r);
+        loop {
+            let kn = self.jump(sp, k, g, &r);
+            if kn >= sp.n {
+                return kn;
+            }
+            let gn = self.position(sp, kn).0;
+            match m.lookup(Vec3::from_array(gn)) {
+                Lookup::Empty(next) => (k, g, r) = (kn, gn, next),
+                Lookup::Sample(_) => return kn,
+            }
+        }
+    }
+}
+
+/// The scalar reference for one ray.
+#[inline]
+fn march_scalar<M: Medium>(m: &M, ctx: &Ctx, sp: &Span, stats: &mut MarchStats) -> Rgba {
+    let mut col = [0.0f32; 3];
+    let mut acc = 0.0f32;
+    let mut k = 0u32;
+    while k < sp.n {
+        let (g, h) = ctx.position(sp, k);
+        match m.lookup(Vec3::from_array(g)) {
+            Lookup::Empty(r) => {
+                let kn = ctx.skip(m, sp, k, g, &r);
+                stats.skipped += (kn - k) as u64;
+                k = kn;
+            }
+            Lookup::Sample(s) => {
+                // Front to back: a = 1 - exp(-tau h); C += (1 - A) a c; A += (1 - A) a.
+                let a = one_minus_exp_neg_scalar(s.tau * h);
+                let w = (1.0 - acc) * a;
+                for (c, sc) in col.iter_mut().zip(s.color) {
+                    *c += w * sc;
+                }
+                acc += w;
+                stats.samples += 1;
+                k += 1;
+                // Not `acc >= thr` written as such: the same predicate as the x8 lanes' `lt`.
+                if acc.partial_cmp(&ctx.thr) != Some(core::cmp::Ordering::Less) {
+                    stats.terminated += (k < sp.n) as u64;
+                    break;
+                }
+            }
+        }
+    }
+    Rgba {
+        r: col[0],
+        g: col[1],
+        b: col[2],
+        a: acc,
+    }
+}
+
+/// Marches one ray with the scalar reference.
+///
+/// Errors only for bad parameters ([`MarchParams::validate`]); a ray that is invalid, misses, or
+/// has zero length inside the medium gives [`Rgba::ZERO`].
+///
+/// ```
+/// use strahl::{Ray, Vec3};
+/// use strahl::volume::{MarchParams, Rgba, TfEntry, TransferFunction, Volume, VolumeMedium, integrate_ray};
+/// let data = [1.0f32; 8];
+/// let vol = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+/// let table = [TfEntry::new([0.0, 1.0, 0.0], 3.0)];
+/// let m = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 1.0).unwrap());
+/// let hit = integrate_ray(&m, &Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z), &MarchParams::reference(0.1)).unwrap();
+/// assert!((hit.a - (1.0 - (-3.0f32).exp())).abs() < 1e-6);
+/// assert_eq!(hit.g, hit.a); // C = c A for constant colour
+/// let miss = integrate_ray(&m, &Ray::new(Vec3::new(5.0, 0.5, -1.0), Vec3::Z), &MarchParams::reference(0.1));
+/// assert_eq!(miss, Ok(Rgba::ZERO));
+/// ```
+pub fn integrate_ray<M: Medium>(m: &M, ray: &Ray, params: &MarchParams) -> Result<Rgba, VolumeError> {
+    let ctx = Ctx::new(m, params)?;
+    let mut stats = MarchStats::default();
+    Ok(match ctx.span(ray) {
+        Some(sp) => march_scalar(m, &ctx, &sp, &mut stats),
+        None => Rgba::ZERO,
+    })
+}
+
+/// Scalar reference: marches `rays[i]` into `out[i]`, one ray at a time.
+///
+/// Errors: bad parameters ([`MarchParams::validate`]), or [`VolumeError::LengthMismatch`] if
+/// `out` is shorter than `rays` (nothing is written then).
+pub fn integrate_scalar<M: Medium>(
+    m: &M,
+    rays: &[Ray],
+    out: &mut [Rgba],
+    params: &MarchParams,
+) -> Result<MarchStats, VolumeError> {
+    let ctx = Ctx::new(m, params)?;
+    if out.len() < rays.len() {
+        return Err(VolumeError::LengthMismatch {
+            rays: rays.len(),
+            out: out.len(),
+        });
+    }
+    let mut stats = MarchStats::default();
+    for (ray, o) in rays.iter().zip(out.iter_mut()) {
+        *o = match ctx.span(ray) {
+            Some(sp) => {
+                stats.rays += 1;
+                stats.truncated += sp.truncated as u64;
+                march_scalar(m, &ctx, &sp, &mut stats)
+            }
+            None => Rgba::ZERO,
+        };
+    }
+    Ok(stats)
+}
+
+#[inline(always)]
+fn set_lane(v: &mut f32x8, l: usize, x: f32) {
+    let mut a = v.to_array();
+    a[l] = x;
+    *v = f32x8::new(a);
+}
+
+/// Lane state of the 8-wide marcher: one ray per lane, in SoA form.
+struct Lanes {
+    ray: [usize; 8],
+    span: [Span; 8],
+    ge: [f32x8; 3],
+    gd: [f32x8; 3],
+    len: f32x8,
+    n: f32x8,
+    k: f32x8,
+    col: [f32x8; 3],
+    acc: f32x8,
+}
+
+impl Lanes {
+    /// Writes lane `l`'s result and loads the next ray that overlaps the medium into it (writing
+    /// [`Rgba::ZERO`] for the ones that do not); leaves the lane idle (`n = 0`) when none is left.
+    fn finish_and_refill(
+        &mut self,
+        l: usize,
+        ctx: &Ctx,
+        rays: &[Ray],
+        out: &mut [Rgba],
+        next: &mut usize,
+        stats: &mut MarchStats,
+    ) {
+        if self.ray[l] != usize::MAX {
+            out[self.ray[l]] = Rgba {
+                r: self.col[0].lane(l),
+                g: self.col[1].lane(l),
+                b: self.col[2].lane(l),
+                a: self.acc.lane(l),
+            };
+            stats.terminated += (self.k.lane(l) < self.n.lane(l)) as u64;
+            self.ray[l] = usize::MAX;
+        }
+        let mut sp = Span::default();
+        while *next < rays.len() {
+            let i = *next;
+            *next += 1;
+            if let Some(s) = ctx.span(&rays[i]) {
+                sp = s;
+                self.ray[l] = i;
+                stats.rays += 1;
+                stats.truncated += s.truncated as u64;
+                break;
+            }
+            out[i] = Rgba::ZERO;
+        }
+        self.span[l] = sp;
+        for a in 0..3 {
+            set_lane(&mut self.ge[a], l, sp.ge[a]);
+            set_lane(&mut self.gd[a], l, sp.gd[a]);
+            set_lane(&mut self.col[a], l, 0.0);
+        }
+        set_lane(&mut self.len, l, sp.len);
+        set_lane(&mut self.n, l, sp.n as f32);
+        set_lane(&mut self.k, l, 0.0);
+        set_lane(&mut self.acc, l, 0.0);
+    }
+}
+
+/// Marches `rays[i]` into `out[i]`, eight rays at a time in the lanes of [`f32x8`]. A lane whose
+/// ray ends (or terminates early) takes the next ray at once, so lanes stay busy when ray lengths
+/// differ.
+///
+/// Every result equals [`integrate_scalar`]'s bit for bit (the same operations in the same order
+/// per ray), and so do the counters. Errors as [`integrate_scalar`].
+///
+/// ```
+/// use strahl::{Ray, Vec3};
+/// use strahl::volume::*;
+/// let data: Vec<u8> = (0..16 * 16 * 16).map(|i| (i * 37 % 251) as u8).collect();
+/// let vol = Volume::new(&data, [16; 3], Vec3::splat(0.25), Vec3::ZERO).unwrap();
+/// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.2], 6.0), TfEntry::new([0.2, 0.5, 1.0], 1.0)];
+/// let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+/// let m = VolumeMedium::new(vol, tf);
+/// let rays: Vec<Ray> = (0..20)
+///     .map(|i| Ray::new(Vec3::new(0.1 + 0.17 * i as f32, 1.9, -1.0), Vec3::new(0.0, -0.3, 1.0)))
+///     .collect();
+/// let (mut a, mut b) = (vec![Rgba::ZERO; 20], vec![Rgba::ZERO; 20]);
+/// let p = MarchParams::fast(0.1);
+/// let sa = integrate_scalar(&m, &rays, &mut a, &p).unwrap();
+/// let sb = integrate_x8(&m, &rays, &mut b, &p).unwrap();
+/// assert!(a.iter().zip(&b).all(|(x, y)| x.bit_eq(y)));
+/// assert_eq!(sa, sb);
+/// ```
+pub fn integrate_x8<M: Medium>(
+    m: &M,
+    rays: &[Ray],
+    out: &mut [Rgba],
+    params: &MarchParams,
+) -> Result<MarchStats, VolumeError> {
+    let ctx = Ctx::new(m, params)?;
+    if out.len() < rays.len() {
+        return Err(VolumeError::LengthMismatch {
+            rays: rays.len(),
+            out: out.len(),
+        });
+    }
+    let mut stats = MarchStats::default();
+    let z = f32x8::splat(0.0);
+    let mut ln = Lanes {
+        ray: [usize::MAX; 8],
+        span: [Span::default(); 8],
+        ge: [z; 3],
+        gd: [z; 3],
+        len: z,
+        n: z,
+        k: z,
+        col: [z; 3],
+        acc: z,
+    };
+    let mut next = 0usize;
+    for l in 0..8 {
+        ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
+    }
+    let dt = f32x8::splat(ctx.dt);
+    let thr = f32x8::splat(ctx.thr);
+    let (zero, one, half) = (f32x8::splat(0.0), f32x8::splat(1.0), f32x8::splat(0.5));
+    let mut regions = [EmptyRegion::default(); 8];
+    loop {
+        // Lanes with a ray, samples left and opacity below the threshold.
+        let live = ln.k.lt(ln.n) & ln.acc.lt(thr);
+        let active = live.bitmask();
+        if active == 0 {
+            break;
+        }
+        // The step's position, as `Ctx::position` per lane.
+        let s0 = ln.k * dt;
+        let h = dt.min_l(ln.len - s0).max_l(zero);
+        let s = if ctx.mid { s0 + half * h } else { s0 };
+        let g = [
+            ln.ge[0] + ln.gd[0] * s,
+            ln.ge[1] + ln.gd[1] * s,
+            ln.ge[2] + ln.gd[2] * s,
+        ];
+        match m.lookup_x8(&g, active, &mut regions) {
+            Err(mask) => {
+                // Some lanes are in empty regions: move them on, then look again.
+                let mut bits = mask & active;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let k = ln.k.lane(l) as u32;
+                    let gl = [g[0].lane(l), g[1].lane(l), g[2].lane(l)];
+                    let kn = ctx.skip(m, &ln.span[l], k, gl, &regions[l]);
+                    stats.skipped += (kn - k) as u64;
+                    set_lane(&mut ln.k, l, kn as f32);
+                    if kn >= ln.span[l].n {
+                        ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
+                    }
+                }
+            }
+            Ok(smp) => {
+                let a = one_minus_exp_neg_x8(smp.tau * h);
+                let w = (one - ln.acc) * a;
+                for c in 0..3 {
+                    ln.col[c] = live.select(ln.col[c] + w * smp.color[c], ln.col[c]);
+                }
+                ln.acc = live.select(ln.acc + w, ln.acc);
+                // Every lane with a ray is live here (finished ones were refilled at once), so k
+                // steps unconditionally: the next positions do not wait for this step's opacity.
+                ln.k += one;
+                stats.samples += active.count_ones() as u64;
+                let done = active & !(ln.k.lt(ln.n) & ln.acc.lt(thr)).bitmask();
+                let mut bits = done;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
+                }
+            }
+        }
+    }
+    Ok(stats)
+}
+
+/// Marches `rays[i]` into `out[i]` with the fastest kernel, [`integrate_x8`].
+#[inline]
+pub fn integrate<M: Medium>(
+    m: &M,
+    rays: &[Ray],
+    out: &mut [Rgba],
+    params: &MarchParams,
+) -> Result<MarchStats, VolumeError> {
+    integrate_x8(m, rays, out, params)
+}

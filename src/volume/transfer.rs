@@ -1,0 +1,423 @@
+//! Transfer functions: a 1D table from scalar value to emitted colour and extinction.
+
+use super::VolumeError;
+use crate::math::{Lane, f32x8, i32x8, max_l, min_l};
+use bytemuck::{Pod, Zeroable};
+
+/// Largest extinction an entry may hold, per world unit: `2^100`. An opacity of exactly 1 converts
+/// to it, and with any step it gives `a = 1 - exp(-tau dt) = 1` in `f32`.
+pub const TAU_MAX: f32 = 1.267_650_6e30;
+
+/// One transfer function entry in physical form: emitted colour `c` (not premultiplied) and
+/// extinction `tau` per world unit. See the [module docs](super) for the convention.
+///
+/// ```
+/// use strahl::volume::TfEntry;
+/// // Authored as premultiplied RGBA with opacity 0.5 for a reference step of 0.1:
+/// let e = TfEntry::from_rgba_premultiplied([0.4, 0.2, 0.0, 0.5], 0.1);
+/// assert!((e.color[0] - 0.8).abs() < 1e-6);                    // c = R / alpha0
+/// assert!((e.tau - core::f32::consts::LN_2 / 0.1).abs() < 1e-4); // -ln(1 - 0.5) / 0.1
+/// // Marching at the reference step gives the authored opacity and colour back:
+/// let [r, _, _, a] = e.rgba_premultiplied(0.1);
+/// assert!((a - 0.5).abs() < 1e-6 && (r - 0.4).abs() < 1e-6);
+/// // Twice the step: opacity 1 - (1 - 0.5)^2.
+/// assert!((e.opacity(0.2) - 0.75).abs() < 1e-6);
+/// ```
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TfEntry {
+    /// Emitted colour `c`, not premultiplied.
+    pub color: [f32; 3],
+    /// Extinction coefficient `tau` per world unit, in `[0, TAU_MAX]`.
+    pub tau: f32,
+}
+
+const _: () = assert!(core::mem::size_of::<TfEntry>() == 16);
+
+impl TfEntry {
+    /// Black and without extinction.
+    pub const TRANSPARENT: Self = Self {
+        color: [0.0; 3],
+        tau: 0.0,
+    };
+
+    /// An entry from colour and extinction per world unit.
+    #[inline]
+    pub const fn new(color: [f32; 3], tau: f32) -> Self {
+        Self { color, tau }
+    }
+
+    /// From premultiplied RGBA authored for the reference step `dt0`: the opacity `alpha0` (clamped
+    /// to `[0, 1]`) of a slab `dt0` thick, and `R = alpha0 c`. Gives `tau = -ln(1 - alpha0) / dt0`
+    /// ([`TAU_MAX`] for `alpha0 = 1`) and `c = R / alpha0` (`0` where `alpha0 = 0`). A NaN `alpha0`
+    /// counts as 0; a `dt0` that is not finite and positive gives a transparent entry.
+    pub fn from_rgba_premultiplied(rgba: [f32; 4], dt0: f32) -> Self {
+        // NaN -> 0 (max_l returns its second operand on NaN).
+        let a = min_l(max_l(rgba[3], 0.0), 1.0);
+        if a == 0.0 || !(dt0 > 0.0 && dt0.is_finite()) {
+            return Self::TRANSPARENT;
+        }
+        let tau = if a >= 1.0 {
+            TAU_MAX
+        } else {
+            min_l(-libm::log1pf(-a) / dt0, TAU_MAX)
+        };
+        Self {
+            color: [rgba[0] / a, rgba[1] / a, rgba[2] / a],
+            tau,
+        }
+    }
+
+    /// From straight (not premultiplied) RGBA authored for the reference step `dt0`: as
+    /// [`from_rgba_premultiplied`](Self::from_rgba_premultiplied) with `c = (r, g, b)`.
+    pub fn from_rgba_straight(rgba: [f32; 4], dt0: f32) -> Self {
+        let e = Self::from_rgba_premultiplied([0.0, 0.0, 0.0, rgba[3]], dt0);
+        if e.tau == 0.0 {
+            return Self::TRANSPARENT;
+        }
+        Self {
+            color: [rgba[0], rgba[1], rgba[2]],
+            tau: e.tau,
+        }
+    }
+
+    /// Opacity of a slab `dt` thick: `1 - exp(-tau dt)`, which equals the corrected
+    /// `1 - (1 - alpha0)^(dt / dt0)` of an entry authored at `dt0`.
+    #[inline]
+    pub fn opacity(&self, dt: f32) -> f32 {
+        1.0 - libm::expf(-(self.tau * dt))
+    }
+
+    /// The premultiplied RGBA of a slab `dt` thick: `[a c, a]` with `a = opacity(dt)`. This is the
+    /// classic opacity-corrected table entry, for callers that composite tables themselves.
+    #[inline]
+    pub fn rgba_premultiplied(&self, dt: f32) -> [f32; 4] {
+        let a = self.opacity(dt);
+        [a * self.color[0], a * self.color[1], a * self.color[2], a]
+    }
+}
+
+/// Opacity correction: the opacity `alpha0` of a slab `dt0` thick, scaled to a slab `dt` thick,
+/// `1 - (1 - alpha0)^(dt / dt0)`.
+///
+/// ```
+/// use strahl::volume::correct_opacity;
+/// assert!((correct_opacity(0.5, 0.2, 0.1) - 0.75).abs() < 1e-6);
+/// assert_eq!(correct_opacity(0.3, 0.1, 0.1), 0.3);
+/// assert_eq!(correct_opacity(1.0, 0.01, 1.0), 1.0);
+/// ```
+#[inline]
+pub fn correct_opacity(alpha0: f32, dt: f32, dt0: f32) -> f32 {
+    1.0 - libm::powf(1.0 - alpha0, dt / dt0)
+}
+
+/// A transfer function: `n` entries spread evenly over the scalar range `[lo, hi]`, interpolated
+/// linearly (colour and extinction separately), clamped outside the range. Borrows its table.
+///
+/// A value `s` maps to the table coordinate `u = (s - lo) (n - 1) / (hi - lo)`, clamped to
+/// `[0, n - 1]` (a NaN value maps to 0), and interpolates entries `j = min(floor(u), n - 2)` and
+/// `j + 1` with weight `u - j`.
+///
+/// ```
+/// use strahl::volume::{TfEntry, TransferFunction};
+/// let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.0], 4.0)];
+/// let tf = TransferFunction::new(&table, 0.0, 200.0).unwrap();
+/// let (tau, c) = tf.lookup_scalar(125.0);
+/// assert_eq!((tau, c), (1.0, [0.25, 0.125, 0.0]));
+/// assert_eq!(tf.lookup_scalar(1e9).0, 4.0);        // clamped
+/// assert_eq!(tf.lookup_scalar(f32::NAN).0, 0.0);   // NaN reads entry 0
+/// assert!(tf.is_transparent(-5.0, 90.0));          // values up to 100 read entries 0 and 1 only
+/// assert!(!tf.is_transparent(-5.0, 100.0));        // conservative at the boundary
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct TransferFunction<'a> {
+    entries: &'a [TfEntry],
+    lo: f32,
+    hi: f32,
+    scale: f32,
+    last: f32,
+    last_idx: i32,
+}
+
+impl<'a> TransferFunction<'a> {
+    /// Most entries a table may have (`2^24`, so that entry indices are exact in `f32`).
+    pub const MAX_ENTRIES: usize = 1 << 24;
+
+    /// A transfer function over `entries` for scalar values in `[lo, hi]`.
+    ///
+    /// Errors: [`VolumeError::EmptyTable`] for no entries (or more than
+    /// [`MAX_ENTRIES`](Self::MAX_ENTRIES)), [`VolumeError::InvalidRange`] unless `lo < hi` are
+    /// finite, [`VolumeError::InvalidEntry`] for a non-finite colour or an extinction that is NaN,
+    /// negative or above [`TAU_MAX`].
+    pub fn new(entries: &'a [TfEntry], lo: f32, hi: f32) -> Result<Self, VolumeError> {
+        if entries.is_empty() || entries.len() > Self::MAX_ENTRIES {
+            return Err(VolumeError::EmptyTable);
+        }
+        if !(lo.is_finite() && hi.is_finite() && lo < hi && (hi - lo).is_finite()) {
+            return Err(VolumeError::InvalidRange);
+        }
+        if let Some(index) = entries
+            .iter()
+            .position(|e| !(e.color.iter().all(|c| c.is_finite()) && e.tau >= 0.0 && e.tau <= TAU_MAX))
+        {
+            return Err(VolumeError::InvalidEntry { index });
+        }
+        let last_idx = entries.len() as i32 - 1;
+        Ok(Self {
+            entries,
+            lo,
+            hi,
+            scale: last_idx as f32 / (hi - lo),
+            last: last_idx as f32,
+            last_idx,
+        })
+    }
+
+    /// The table.
+    #[inline]
+    pub fn entries(&self) -> &'a [TfEntry] {
+        self.entries
+    }
+
+    /// The scalar range `(lo, hi)` the table spans.
+    #[inline]
+    pub fn range(&self) -> (f32, f32) {
+        (self.lo, self.hi)
+    }
+
+    /// Largest `|c|` over all entries and channels: the factor in the early-termination bound.
+    pub fn max_color(&self) -> f32 {
+        self.entries
+            .iter()
+            .flat_map(|e| e.color)
+            .fold(0.0, |m, c| max_l(crate::math::abs(c), m))
+    }
+
+    /// Table coordinate of `s`, clamped.
+    #[inline(always)]
+    fn coord(&self, s: f32) -> f32 {
+        min_l(max_l((s - self.lo) * self.scale, 0.0), self.last)
+    }
+
+    /// Extinction and colour at scalar value `s`.
+    ///
+    /// Reads entries `j` and `j + 1` with `j = min(floor(u), n - 2)` and weight `w = u - j` (so
+    /// `w = 1` at the top of the range); a one-entry table is constant.
+    #[inline(always)]
+    pub fn lookup_scalar(&self, s: f32) -> (f32, [f32; 3]) {
+        if self.last_idx == 0 {
+            let e = &self.entries[0];
+            return (e.tau, e.color);
+        }
+        let u = self.coord(s);
+        let j = (u as i32).min(self.last_idx - 1);
+        let w = u - j as f32;
+        let (e0, e1) = (&self.entries[j as usize], &self.entries[j as usize + 1]);
+        let l = |a: f32, b: f32| a + (b - a) * w;
+        (
+            l(e0.tau, e1.tau),
+            [
+                l(e0.color[0], e1.color[0]),
+                l(e0.color[1], e1.color[1]),
+                l(e0.color[2], e1.color[2]),
+            ],
+        )
+    }
+
+    /// Eight lookups; lane `i` equals [`lookup_scalar`](Self::lookup_scalar) of lane `i` bit for bit.
+    #[inline(always)]
+    pub fn lookup_x8(&self, s: f32x8) -> (f32x8, [f32x8; 3]) {
+        if self.last_idx == 0 {
+            let e = &self.entries[0];
+            return (f32x8::splat(e.tau), e.color.map(f32x8::splat));
+        }
+        let u = ((s - f32x8::splat(self.lo)) * f32x8::splat(self.scale))
+            .max_l(f32x8::splat(0.0))
+            .min_l(f32x8::splat(self.last));
+        let j = u.trunc_int().min(i32x8::splat(self.last_idx - 1));
+        let w = u - j.round_float();
+        let j = j.to_array();
+        // PERF: entries j and j + 1 are 8 adjacent floats: one unaligned load per lane, then an
+        // 8 x 8 transpose gives r0, g0, b0, tau0, r1, g1, b1, tau1 across the lanes.
+        let flat: &[f32] = bytemuck::cast_slice(self.entries);
+        let rows: [f32x8; 8] = core::array::from_fn(|l| {
+            let at = j[l] as usize * 4;
+            match flat.get(at..at + 8) {
+                Some(r) => f32x8::new(r.try_into().unwrap_or([0.0; 8])),
+                None => f32x8::splat(0.0), // unreachable: j <= n - 2
+            }
+        });
+        let [r0, g0, b0, t0, r1, g1, b1, t1] = f32x8::transpose(rows);
+        let l = |a: f32x8, b: f32x8| a + (b - a) * w;
+        (l(t0, t1), [l(r0, r1), l(g0, g1), l(b0, b1)])
+    }
+
+    /// `true` if every value in `[min, max]` maps to zero extinction. Conservative: the range is
+    /// widened by `(|min| + |max|) 2^-16` first, far more than the rounding of a trilinear
+    /// interpolation can take a value outside the range of its voxels, and the entry after the
+    /// last one reached is checked too (interpolation reads it). A NaN bound, or `min > max`, checks
+    /// the whole table.
+    pub fn is_transparent(&self, min: f32, max: f32) -> bool {
+        let (a, b) = if min <= max {
+            let pad = (crate::math::abs(min) + crate::math::abs(max)) * (1.0 / 65536.0) + f32::MIN_POSITIVE;
+            // coord is monotone (every rounding is), so all values in the widened range map between.
+            (self.coord(min - pad), self.coord(max + pad))
+        } else {
+            (0.0, self.last)
+        };
+        let first = (a as i32).min(self.last_idx - 1).max(0) as usize;
+        let last = ((b as i32) + 1).min(self.last_idx) as usize;
+        self.entries[first..=last].iter().all(|e| e.tau == 0.0)
+    }
+
+    /// A hash of what empty-space classification depends on: the range, the table length and which
+    /// entries have zero extinction (colours do not matter). FNV-1a, 64 bits.
+    pub fn fingerprint(&self) -> u64 {
+        const PRIME: u64 = 0x0000_0100_0000_01b3;
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |x: u64| {
+            for b in x.to_le_bytes() {
+                h = (h ^ b as u64).wrapping_mul(PRIME);
+            }
+        };
+        eat(self.lo.to_bits() as u64 | (self.hi.to_bits() as u64) << 32);
+        eat(self.entries.len() as u64);
+        for chunk in self.entries.chunks(64) {
+            let mut bits = 0u64;
+            for (i, e) in chunk.iter().enumerate() {
+                bits |= ((e.tau == 0.0) as u64) << i;
+            }
+            eat(bits);
+        }
+        h
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn construction_errors() {
+        let ok = [TfEntry::TRANSPARENT; 4];
+        assert_eq!(
+            TransferFunction::new(&[], 0.0, 1.0).unwrap_err(),
+            VolumeError::EmptyTable
+        );
+        for (lo, hi) in [
+            (1.0, 1.0),
+            (2.0, 1.0),
+            (f32::NAN, 1.0),
+            (0.0, f32::INFINITY),
+            (-3e38, 3e38),
+        ] {
+            assert_eq!(
+                TransferFunction::new(&ok, lo, hi).unwrap_err(),
+                VolumeError::InvalidRange,
+                "{lo} {hi}"
+            );
+        }
+        for bad in [
+            TfEntry::new([f32::NAN, 0.0, 0.0], 1.0),
+            TfEntry::new([0.0; 3], -1.0),
+            TfEntry::new([0.0; 3], f32::NAN),
+            TfEntry::new([0.0; 3], f32::INFINITY),
+        ] {
+            let t = [TfEntry::TRANSPARENT, bad];
+            assert_eq!(
+                TransferFunction::new(&t, 0.0, 1.0).unwrap_err(),
+                VolumeError::InvalidEntry { index: 1 }
+            );
+        }
+    }
+
+    #[test]
+    fn authoring_conversions() {
+        assert_eq!(
+            TfEntry::from_rgba_premultiplied([1.0, 1.0, 1.0, 0.0], 1.0),
+            TfEntry::TRANSPARENT
+        );
+        assert_eq!(
+            TfEntry::from_rgba_premultiplied([0.5, 0.5, 0.5, f32::NAN], 1.0).tau,
+            0.0
+        );
+        assert_eq!(TfEntry::from_rgba_premultiplied([0.5, 0.5, 0.5, 0.5], 0.0).tau, 0.0);
+        let opaque = TfEntry::from_rgba_premultiplied([1.0, 0.0, 0.0, 1.0], 1.0);
+        assert_eq!(opaque.tau, TAU_MAX);
+        assert_eq!(opaque.opacity(1e-6), 1.0);
+        let s = TfEntry::from_rgba_straight([0.2, 0.4, 0.6, 0.3], 0.5);
+        assert_eq!(s.color, [0.2, 0.4, 0.6]);
+        assert!((s.opacity(0.5) - 0.3).abs() < 1e-6);
+        // Opacity correction agrees with the extinction form.
+        for (a0, dt, dt0) in [(0.1f32, 0.3f32, 0.1f32), (0.9, 0.01, 1.0), (0.5, 1.0, 1.0)] {
+            let e = TfEntry::from_rgba_straight([1.0; 4].map(|x| x * a0), dt0);
+            assert!((e.opacity(dt) - correct_opacity(a0, dt, dt0)).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    #[allow(clippy::needless_range_loop)]
+    fn lanes_equal_scalar_and_transparency_is_conservative() {
+        let mut table = [TfEntry::TRANSPARENT; 17];
+        for (i, e) in table.iter_mut().enumerate() {
+            if (6..11).contains(&i) {
+                *e = TfEntry::new([i as f32 * 0.1, 1.0, 0.5], i as f32 * 0.7);
+            }
+        }
+        let tf = TransferFunction::new(&table, -3.0, 13.0).unwrap();
+        let vals: [f32; 16] = [
+            -10.0,
+            -3.0,
+            -2.999,
+            0.0,
+            2.5,
+            2.9999,
+            3.0,
+            3.0001,
+            7.25,
+            12.999,
+            13.0,
+            1e30,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            -0.0,
+        ];
+        for c in vals.chunks(8) {
+            let a: [f32; 8] = c.try_into().unwrap();
+            let (t8, c8) = tf.lookup_x8(f32x8::new(a));
+            for i in 0..8 {
+                let (t, col) = tf.lookup_scalar(a[i]);
+                assert_eq!(t8.to_array()[i].to_bits(), t.to_bits());
+                for ch in 0..3 {
+                    assert_eq!(c8[ch].to_array()[i].to_bits(), col[ch].to_bits());
+                }
+            }
+        }
+        // Entries 6..=10 are opaque: values in [3, 7] map to them (entry = value + 3).
+        assert!(tf.is_transparent(-3.0, 1.0));
+        assert!(!tf.is_transparent(-3.0, 2.5));
+        assert!(!tf.is_transparent(8.0, 20.0));
+        assert!(tf.is_transparent(9.0, 20.0));
+        assert!(!tf.is_transparent(f32::NAN, 0.0));
+        // Every value judged transparent looks up zero extinction.
+        for i in 0..=1600 {
+            let s = -3.0 + i as f32 * 0.01;
+            if tf.is_transparent(s, s) {
+                assert_eq!(tf.lookup_scalar(s).0, 0.0, "{s}");
+            }
+        }
+        assert_eq!(tf.max_color(), 1.0);
+    }
+
+    #[test]
+    fn fingerprint_ignores_colour() {
+        let a = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+        let b = [TfEntry::TRANSPARENT, TfEntry::new([0.5; 3], 3.0)];
+        let c = [TfEntry::new([0.5; 3], 3.0), TfEntry::TRANSPARENT];
+        let f = |t: &[TfEntry], hi| TransferFunction::new(t, 0.0, hi).unwrap().fingerprint();
+        assert_eq!(f(&a, 1.0), f(&b, 1.0));
+        assert_ne!(f(&a, 1.0), f(&c, 1.0));
+        assert_ne!(f(&a, 1.0), f(&a, 2.0));
+    }
+}

@@ -1,0 +1,712 @@
+//! Volume rendering against closed forms (Max 1995's emission-absorption model), the observed
+//! convergence order (Etiene et al. 2014), SIMD against the scalar reference, skipping and
+//! termination against marching everything, and bad input.
+
+mod common;
+
+use common::{bounded, raw, vec3};
+use proptest::prelude::*;
+use strahl::volume::*;
+use strahl::{Aabb, Ray, Vec3};
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+
+/// A medium in the slab `[-1, 1] x [-1, 1] x [0, depth]` whose extinction and colour depend on z
+/// only; rays along +z from `z = -1` sample it at `z = s` exactly.
+struct Slab<F: Fn(f32) -> (f32, [f32; 3])> {
+    f: F,
+    depth: f32,
+}
+
+impl<F: Fn(f32) -> (f32, [f32; 3])> Medium for Slab<F> {
+    fn bounds(&self) -> Aabb {
+        Aabb::new(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, self.depth))
+    }
+    fn lookup(&self, g: Vec3) -> Lookup {
+        let (tau, color) = (self.f)(g.z);
+        Lookup::Sample(Sample { tau, color })
+    }
+}
+
+fn down_z(x: f32, y: f32) -> Ray {
+    Ray::new(Vec3::new(x, y, -1.0), Vec3::Z)
+}
+
+fn params(step: f32, sampling: Sampling) -> MarchParams {
+    MarchParams {
+        sampling,
+        ..MarchParams::reference(step)
+    }
+}
+
+/// Marches with both kernels, checks they agree bit for bit, returns the scalar results.
+fn both<M: Medium>(m: &M, rays: &[Ray], p: &MarchParams) -> (Vec<Rgba>, MarchStats) {
+    let mut a = vec![Rgba::ZERO; rays.len()];
+    let mut b = vec![Rgba { r: 9.0, ..Rgba::ZERO }; rays.len()];
+    let sa = integrate_scalar(m, rays, &mut a, p).unwrap();
+    let sb = integrate_x8(m, rays, &mut b, p).unwrap();
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(x.bit_eq(y), "ray {i}: scalar {x:?} x8 {y:?}");
+    }
+    assert_eq!(sa, sb);
+    (a, sb)
+}
+
+fn one<M: Medium>(m: &M, ray: Ray, p: &MarchParams) -> Rgba {
+    both(m, &[ray], p).0[0]
+}
+
+/// Least-squares slope of log(err) against log(dt).
+fn slope(pts: &[(f64, f64)]) -> f64 {
+    let n = pts.len() as f64;
+    let (lx, ly): (Vec<f64>, Vec<f64>) = pts.iter().map(|&(x, y)| (x.ln(), y.ln())).unzip();
+    let (mx, my) = (lx.iter().sum::<f64>() / n, ly.iter().sum::<f64>() / n);
+    let sxy: f64 = lx.iter().zip(&ly).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let sxx: f64 = lx.iter().map(|x| (x - mx) * (x - mx)).sum();
+    sxy / sxx
+}
+
+/// A `n^3` u8 volume over `[0, 1]^3`: a ball of radius `r` (in `[0, 1]` units) around
+/// `(0.5, 0.5, 0.5)`, 255 at the centre falling linearly to 0 at its surface, 0 outside.
+fn ball(n: u32, r: f32) -> Vec<u8> {
+    let mut v = Vec::with_capacity((n * n * n) as usize);
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                let p = Vec3::new(i as f32, j as f32, k as f32) / (n - 1) as f32 - Vec3::splat(0.5);
+                v.push((255.0 * (1.0 - p.length() / r)).clamp(0.0, 255.0) as u8);
+            }
+        }
+    }
+    v
+}
+
+fn unit_volume<V: Voxel>(data: &[V], n: u32) -> Volume<'_, V> {
+    Volume::new(data, [n; 3], Vec3::splat(1.0 / (n - 1) as f32), Vec3::ZERO).unwrap()
+}
+
+/// Rays through the unit cube from several directions, some grazing, some missing.
+fn test_rays(count: usize) -> Vec<Ray> {
+    let mut s = 0x9e37_79b9_u32;
+    let mut rnd = || {
+        s ^= s << 13;
+        s ^= s >> 17;
+        s ^= s << 5;
+        s as f32 / u32::MAX as f32
+    };
+    (0..count)
+        .map(|_| {
+            let o = Vec3::new(rnd() * 3.0 - 1.0, rnd() * 3.0 - 1.0, -1.5);
+            let target = Vec3::new(rnd(), rnd(), rnd()) * 1.2 - Vec3::splat(0.1);
+            Ray::new(o, target - o)
+        })
+        .collect()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Accuracy against closed forms
+
+#[test]
+fn constant_medium_is_exact_at_every_step() {
+    let data = [200u8; 64];
+    let vol = unit_volume(&data, 4);
+    let c = [0.3f32, 0.6, 0.9];
+    let table = [TfEntry::new(c, 1.7)];
+    let m = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 255.0).unwrap());
+    let rays = [
+        (down_z(0.5, 0.5), 1.0f64),
+        (Ray::new(Vec3::new(-1.0, -1.0, -1.0), Vec3::ONE), 3f64.sqrt()),
+        (Ray::new(Vec3::new(0.25, -1.0, 0.5), Vec3::new(0.0, 2.0, 0.0)), 1.0),
+        // Starts inside: from (0.5, 0.5, 0.2) to the z = 1 face.
+        (Ray::new(Vec3::new(0.5, 0.5, 0.2), Vec3::Z), 0.8),
+    ];
+    for step in [0.01f32, 0.07, 0.1, 0.3, 1.0, 5.0] {
+        for sampling in [Sampling::Endpoint, Sampling::Midpoint] {
+            for &(ray, len) in &rays {
+                let p = one(&m, ray, &params(step, sampling));
+                let want = 1.0 - (-1.7 * len).exp();
+                let n = (len / step as f64).ceil();
+                let tol = 1e-6 * (n + 2.0);
+                assert!((p.a as f64 - want).abs() < tol, "step {step}: A {} want {want}", p.a);
+                for (got, c) in [p.r, p.g, p.b].into_iter().zip(c) {
+                    assert!((got - c * p.a).abs() < tol as f32, "C = c A");
+                }
+            }
+        }
+    }
+}
+
+/// Front-to-back compositing of homogeneous segments `(length, tau, colour)`, in f64.
+fn segments_closed_form(segs: &[(f64, f64, [f64; 3])]) -> [f64; 4] {
+    let (mut c, mut t) = ([0.0; 3], 1.0);
+    for &(l, tau, col) in segs {
+        let a = 1.0 - (-tau * l).exp();
+        for i in 0..3 {
+            c[i] += t * a * col[i];
+        }
+        t *= 1.0 - a;
+    }
+    [c[0], c[1], c[2], 1.0 - t]
+}
+
+#[test]
+fn piecewise_constant_segments_aligned_with_the_steps_are_exact() {
+    let segs = [
+        (0.25, 2.0, [1.0, 0.0, 0.0]),
+        (0.25, 0.0, [0.0, 0.0, 0.0]),
+        (0.375, 5.0, [0.0, 1.0, 0.0]),
+        (0.125, 0.5, [0.0, 0.0, 1.0]),
+    ];
+    let medium = Slab {
+        f: |z: f32| {
+            let (mut start, mut i) = (0.0, 0);
+            while i + 1 < segs.len() && z >= start + segs[i].0 as f32 {
+                start += segs[i].0 as f32;
+                i += 1;
+            }
+            let (_, tau, c) = segs[i];
+            (tau as f32, c.map(|x| x as f32))
+        },
+        depth: 1.0,
+    };
+    let want = segments_closed_form(&segs);
+    for e in 3..=8 {
+        let dt = 0.5f32.powi(e);
+        for sampling in [Sampling::Endpoint, Sampling::Midpoint] {
+            let p = one(&medium, down_z(0.1, -0.3), &params(dt, sampling));
+            let got = [p.r, p.g, p.b, p.a];
+            for i in 0..4 {
+                assert!(
+                    (got[i] as f64 - want[i]).abs() < 2e-6 * (1 << e) as f64,
+                    "dt 2^-{e} {sampling:?} ch {i}: {} want {}",
+                    got[i],
+                    want[i]
+                );
+            }
+        }
+    }
+}
+
+/// An f32 volume whose value is z (spacing 1/16 along z), and a two-entry transfer function from
+/// tau = a at 0 to a + b at 1: along a ray down z, tau = a + b t.
+fn ramp_volume() -> Vec<f32> {
+    let mut d = vec![0.0f32; 2 * 2 * 17];
+    for k in 0..17 {
+        for i in 0..4 {
+            d[k * 4 + i] = k as f32 / 16.0;
+        }
+    }
+    d
+}
+
+#[test]
+fn linear_ramp_optical_depth() {
+    let (a, b) = (0.5f64, 3.0f64);
+    let data = ramp_volume();
+    let vol = Volume::new(&data, [2, 2, 17], Vec3::new(1.0, 1.0, 1.0 / 16.0), Vec3::ZERO).unwrap();
+    let c = [0.2f32, 0.4, 0.8];
+    let table = [TfEntry::new(c, a as f32), TfEntry::new(c, (a + b) as f32)];
+    let m = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 1.0).unwrap());
+    let ray = down_z(0.3, 0.7);
+    let depth = a + b / 2.0; // a L + b L^2 / 2 with L = 1
+    // Midpoint sampling is exact for a linear integrand, also with a partial last step.
+    for dt in [0.5f32, 0.3, 0.125, 0.07, 1.0 / 64.0] {
+        let p = one(&m, ray, &params(dt, Sampling::Midpoint));
+        assert!(
+            (p.a as f64 - (1.0 - (-depth).exp())).abs() < 2e-6,
+            "midpoint dt {dt}: {}",
+            p.a
+        );
+        assert!((p.b - 0.8 * p.a).abs() < 1e-6);
+    }
+    // Endpoint sampling (left sums) misses exactly b L dt / 2 of optical depth when dt divides L.
+    for e in 2..=6 {
+        let dt = 0.5f64.powi(e);
+        let p = one(&m, ray, &params(dt as f32, Sampling::Endpoint));
+        let want = 1.0 - (-(depth - b * dt / 2.0)).exp();
+        assert!(
+            (p.a as f64 - want).abs() < 2e-6,
+            "endpoint dt {dt}: {} want {want}",
+            p.a
+        );
+    }
+}
+
+const TAU0: f32 = 3.0;
+const SCALE_H: f32 = 0.4;
+
+fn exp_depth(l: f64) -> f64 {
+    TAU0 as f64 * SCALE_H as f64 * (1.0 - (-l / SCALE_H as f64).exp())
+}
+
+#[test]
+fn exponential_density_optical_depth() {
+    let m = Slab {
+        f: |z: f32| (TAU0 * libm::expf(-z / SCALE_H), [1.0, 0.5, 0.25]),
+        depth: 1.0,
+    };
+    let want = 1.0 - (-exp_depth(1.0)).exp();
+    let p = one(&m, down_z(0.0, 0.0), &params(1.0 / 256.0, Sampling::Midpoint));
+    // Midpoint rule: error at most L dt^2 / 24 max|tau''| = 1.2e-5 in optical depth.
+    assert!((p.a as f64 - want).abs() < 2e-5, "{} want {want}", p.a);
+    assert!((p.g - 0.5 * p.a).abs() < 1e-6);
+
+    // The same through a volume: exp(-z/h) sampled every 1/128 and a linear transfer function;
+    // trilinear interpolation adds at most dz^2 / 8 max|f''| = 5e-5 relative in tau.
+    let n = 129;
+    let mut data = vec![0.0f32; 2 * 2 * n];
+    for k in 0..n {
+        for i in 0..4 {
+            data[k * 4 + i] = libm::expf(-(k as f32 / (n - 1) as f32) / SCALE_H);
+        }
+    }
+    let vol = Volume::new(&data, [2, 2, n as u32], Vec3::new(1.0, 1.0, 1.0 / 128.0), Vec3::ZERO).unwrap();
+    let table = [TfEntry::new([1.0; 3], 0.0), TfEntry::new([1.0; 3], TAU0)];
+    let vm = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 1.0).unwrap());
+    let p = one(&vm, down_z(0.5, 0.5), &params(1.0 / 256.0, Sampling::Midpoint));
+    assert!((p.a as f64 - want).abs() < 2e-4, "{} want {want}", p.a);
+}
+
+/// Etiene et al. 2014: refine the step, fit the slope of log(error) against log(dt).
+#[test]
+fn observed_convergence_order() {
+    // Exponential atmosphere with colour varying in depth, so both A and C have smooth integrands.
+    let m = Slab {
+        f: |z: f32| (TAU0 * libm::expf(-z / SCALE_H), [1.0 - 0.5 * z, 0.5, 0.25]),
+        depth: 1.0,
+    };
+    let a_exact = 1.0 - (-exp_depth(1.0)).exp();
+    // C_red = int_0^1 (1 - z/2) tau(z) exp(-depth(z)) dz, by composite Simpson in f64.
+    let f = |z: f64| (1.0 - z / 2.0) * TAU0 as f64 * (-z / SCALE_H as f64).exp() * (-exp_depth(z)).exp();
+    let n = 20_000;
+    let hz = 1.0 / n as f64;
+    let simpson: f64 = (0..=n)
+        .map(|i| {
+            let w = if i == 0 || i == n {
+                1.0
+            } else if i % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            };
+            w * f(i as f64 * hz)
+        })
+        .sum::<f64>()
+        * hz
+        / 3.0;
+    for (sampling, lo, hi) in [(Sampling::Endpoint, 0.9, 1.1), (Sampling::Midpoint, 1.85, 2.15)] {
+        let (mut ea, mut ec) = (vec![], vec![]);
+        for e in 2..=7 {
+            let dt = 0.5f64.powi(e);
+            let p = one(&m, down_z(0.0, 0.0), &params(dt as f32, sampling));
+            ea.push((dt, (p.a as f64 - a_exact).abs()));
+            ec.push((dt, (p.r as f64 - simpson).abs()));
+        }
+        let (sa, sc) = (slope(&ea), slope(&ec));
+        println!("{sampling:?}: order {sa:.3} (A), {sc:.3} (C); errors {ea:?}");
+        assert!((lo..hi).contains(&sa), "{sampling:?} order in A: {sa}");
+        assert!((lo..hi).contains(&sc), "{sampling:?} order in C: {sc}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// SIMD against scalar, skipping and termination against marching everything
+
+fn ball_tf() -> [TfEntry; 8] {
+    let mut t = [TfEntry::TRANSPARENT; 8];
+    for (i, e) in t.iter_mut().enumerate().skip(3) {
+        *e = TfEntry::new([i as f32 / 8.0, 1.0 - i as f32 / 8.0, 0.5], i as f32 * 1.5);
+    }
+    t
+}
+
+#[test]
+fn skipping_leaves_the_image_unchanged_bit_for_bit() {
+    let n = 48;
+    let data = ball(n, 0.3);
+    let vol = unit_volume(&data, n);
+    let table = ball_tf();
+    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    let plain = VolumeMedium::new(vol, tf);
+    let rays = test_rays(600);
+    for block in [2, 4, 8, 16, 64] {
+        let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+        grid.classify(&tf);
+        // With blocks of 64 the single block holds the ball: nothing to skip, nothing changes.
+        let sparse = block < 64;
+        assert!(
+            !sparse || grid.empty_fraction() > 0.3,
+            "block {block}: {}",
+            grid.empty_fraction()
+        );
+        let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+        for p in [
+            params(0.013, Sampling::Midpoint),
+            params(0.02, Sampling::Endpoint),
+            MarchParams::fast(0.011),
+        ] {
+            let (a, sa) = both(&plain, &rays, &p);
+            let (b, sb) = both(&skipping, &rays, &p);
+            for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+                assert!(x.bit_eq(y), "block {block} ray {i}: {x:?} vs {y:?}");
+            }
+            assert!(!sparse || (sb.skipped > 0 && sb.samples < sa.samples), "{sa:?} {sb:?}");
+            assert!(a.iter().any(|x| x.a > 0.5));
+        }
+    }
+}
+
+#[test]
+fn regrid_after_transfer_function_change() {
+    let n = 32;
+    let data = ball(n, 0.3);
+    let vol = unit_volume(&data, n);
+    let t1 = ball_tf();
+    let tf1 = TransferFunction::new(&t1, 0.0, 255.0).unwrap();
+    // t2 makes the low values (the shell of the ball and beyond) visible: more non-empty blocks.
+    let mut t2 = t1;
+    t2[1] = TfEntry::new([0.0, 0.0, 1.0], 0.7);
+    let tf2 = TransferFunction::new(&t2, 0.0, 255.0).unwrap();
+    // A colour-only change keeps the classification.
+    let mut t3 = t1;
+    t3[5].color = [1.0, 1.0, 1.0];
+    let tf3 = TransferFunction::new(&t3, 0.0, 255.0).unwrap();
+
+    let mut grid = MacrocellGrid::build(&vol, GridParams::fine()).unwrap();
+    assert_eq!(
+        VolumeMedium::new(vol, tf1).with_grid(&grid).unwrap_err(),
+        VolumeError::StaleGrid
+    );
+    grid.classify(&tf1);
+    let before = grid.empty_fraction();
+    assert!(VolumeMedium::new(vol, tf3).with_grid(&grid).is_ok());
+    assert_eq!(
+        VolumeMedium::new(vol, tf2).with_grid(&grid).unwrap_err(),
+        VolumeError::StaleGrid
+    );
+    grid.classify(&tf2);
+    assert!(grid.empty_fraction() < before);
+    let rays = test_rays(300);
+    let p = params(0.02, Sampling::Midpoint);
+    let (a, _) = both(&VolumeMedium::new(vol, tf2), &rays, &p);
+    let (b, _) = both(&VolumeMedium::new(vol, tf2).with_grid(&grid).unwrap(), &rays, &p);
+    assert!(a.iter().zip(&b).all(|(x, y)| x.bit_eq(y)));
+    // A grid of another volume is refused.
+    let small = unit_volume(&data[..8], 2);
+    assert_eq!(
+        VolumeMedium::new(small, tf2).with_grid(&grid).unwrap_err(),
+        VolumeError::GridMismatch
+    );
+}
+
+#[test]
+fn early_termination_stays_within_its_bound() {
+    let n = 32;
+    let data = ball(n, 0.45);
+    let vol = unit_volume(&data, n);
+    let rays = test_rays(400);
+    let base = MarchParams::reference(0.01);
+    // A dense medium (step opacity up to 0.47) and an opaque one (up to 0.998).
+    for (gain, opaque) in [(6.0, false), (60.0, true)] {
+        let mut table = ball_tf();
+        for e in &mut table[3..] {
+            e.tau *= gain;
+            e.color = [e.color[0] * 2.0, e.color[1], 0.3];
+        }
+        let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+        let maxc = tf.max_color();
+        let m = VolumeMedium::new(vol, tf);
+        let (full, s_full) = both(&m, &rays, &base);
+        // Termination at A == 1 only is exact; it fires in the opaque medium.
+        let (exact, s_exact) = both(&m, &rays, &MarchParams::quality(0.01));
+        assert!(full.iter().zip(&exact).all(|(x, y)| x.bit_eq(y)));
+        if opaque {
+            assert!(
+                s_exact.terminated > 0 && s_exact.samples < s_full.samples,
+                "{s_exact:?}"
+            );
+        }
+        for eps in [1e-4f32, 1.0 / 256.0, 0.05, 0.3] {
+            let (t, st) = both(
+                &m,
+                &rays,
+                &MarchParams {
+                    termination: Some(eps),
+                    ..base
+                },
+            );
+            assert!(st.terminated > 0 && st.samples < s_full.samples);
+            for (x, y) in full.iter().zip(&t) {
+                let bound = eps * maxc + 1e-6;
+                assert!((x.r - y.r).abs() <= bound && (x.g - y.g).abs() <= bound && (x.b - y.b).abs() <= bound);
+                assert!((x.a - y.a).abs() <= eps + 1e-6);
+            }
+        }
+    }
+}
+
+fn arb_case() -> impl Strategy<Value = (Vec<u8>, [u32; 3], Vec<TfEntry>, Vec<Ray>, MarchParams, u32)> {
+    let dims = (1u32..7, 1u32..7, 1u32..7);
+    let entry = prop_oneof![
+        Just(TfEntry::TRANSPARENT),
+        (0.0f32..1.0, 0.0f32..1.0, 0.0f32..20.0).prop_map(|(r, g, t)| TfEntry::new([r, g, 0.5], t)),
+    ];
+    let ray = prop_oneof![
+        3 => (vec3(-3.0f32..4.0), vec3(bounded())).prop_map(|(o, d)| Ray::new(o, d)),
+        1 => (vec3(raw()), vec3(raw()), raw(), raw()).prop_map(|(o, d, t0, t1)| Ray::with_range(o, d, t0, t1)),
+    ];
+    let p = (
+        0.01f32..1.5,
+        any::<bool>(),
+        prop_oneof![Just(None), Just(Some(0.0)), (0.0f32..0.9).prop_map(Some)],
+        prop_oneof![4 => Just(DEFAULT_MAX_STEPS), 1 => 1u32..50],
+    )
+        .prop_map(|(step, mid, termination, max_steps)| MarchParams {
+            step,
+            sampling: if mid { Sampling::Midpoint } else { Sampling::Endpoint },
+            termination,
+            max_steps,
+        });
+    dims.prop_flat_map(move |(x, y, z)| {
+        let n = (x * y * z) as usize;
+        (
+            proptest::collection::vec(prop_oneof![3 => Just(0u8), 1 => any::<u8>()], n),
+            Just([x, y, z]),
+            proptest::collection::vec(entry.clone(), 1..9),
+            proptest::collection::vec(ray.clone(), 1..40),
+            p.clone(),
+            prop_oneof![Just(2u32), Just(4)],
+        )
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(96))]
+
+    /// x8 equals scalar bit for bit, and skipping changes nothing, on random volumes, transfer
+    /// functions, rays (including special values) and parameters.
+    #[test]
+    fn x8_scalar_and_skipping_agree((data, dims, table, rays, p, block) in arb_case()) {
+        let vol = Volume::new(&data, dims, Vec3::new(0.5, 0.25, 0.75), Vec3::new(0.1, -0.2, 0.3)).unwrap();
+        let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+        let plain = VolumeMedium::new(vol, tf);
+        let (a, _) = both(&plain, &rays, &p);
+        let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+        grid.classify(&tf);
+        let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+        let (b, _) = both(&skipping, &rays, &p);
+        for (x, y) in a.iter().zip(&b) {
+            prop_assert!(x.bit_eq(y), "{:?} vs {:?}", x, y);
+            prop_assert!((0.0..=1.0).contains(&x.a));
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad input: a defined result or a clear error, never a panic or a hang
+
+fn small_medium(data: &[u8]) -> VolumeMedium<'_, u8> {
+    static TABLE: [TfEntry; 2] = [TfEntry::new([1.0; 3], 0.5), TfEntry::new([1.0; 3], 4.0)];
+    VolumeMedium::new(unit_volume(data, 4), TransferFunction::new(&TABLE, 0.0, 255.0).unwrap())
+}
+
+#[test]
+fn bad_steps_are_errors() {
+    let data = [100u8; 64];
+    let m = small_medium(&data);
+    let rays = [down_z(0.5, 0.5)];
+    let mut out = [Rgba { r: 7.0, ..Rgba::ZERO }];
+    for step in [0.0, -0.0, -0.1, f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let p = MarchParams::reference(step);
+        assert_eq!(integrate_ray(&m, &rays[0], &p), Err(VolumeError::InvalidStep));
+        assert_eq!(integrate_scalar(&m, &rays, &mut out, &p), Err(VolumeError::InvalidStep));
+        assert_eq!(integrate_x8(&m, &rays, &mut out, &p), Err(VolumeError::InvalidStep));
+        assert_eq!(out[0].r, 7.0, "nothing written on error");
+    }
+    for eps in [f32::NAN, -0.1, 1.0, 2.0] {
+        let p = MarchParams {
+            termination: Some(eps),
+            ..MarchParams::reference(0.1)
+        };
+        assert_eq!(
+            integrate_x8(&m, &rays, &mut out, &p),
+            Err(VolumeError::InvalidTermination)
+        );
+    }
+    for max_steps in [0, MAX_STEPS_LIMIT + 1] {
+        let p = MarchParams {
+            max_steps,
+            ..MarchParams::reference(0.1)
+        };
+        assert_eq!(
+            integrate_scalar(&m, &rays, &mut out, &p),
+            Err(VolumeError::InvalidMaxSteps)
+        );
+    }
+    assert_eq!(
+        integrate_x8(&m, &[rays[0]; 2], &mut out, &MarchParams::reference(0.1)),
+        Err(VolumeError::LengthMismatch { rays: 2, out: 1 })
+    );
+}
+
+#[test]
+fn degenerate_and_missing_rays_are_transparent() {
+    let data = [100u8; 64];
+    let m = small_medium(&data);
+    let o = Vec3::new(0.5, 0.5, -1.0);
+    let rays = [
+        Ray::with_range(Vec3::splat(0.5), Vec3::Z, 0.2, 0.2), // zero length inside
+        Ray::with_range(o, Vec3::Z, 1.5, 1.5),
+        Ray::with_range(o, Vec3::Z, 1.7, 1.2), // tmin > tmax
+        Ray::with_range(o, Vec3::Z, 0.0, 0.5), // ends before the volume
+        Ray::new(o, Vec3::ZERO),
+        Ray::new(Vec3::new(f32::NAN, 0.5, -1.0), Vec3::Z),
+        Ray::new(o, Vec3::new(0.0, f32::INFINITY, 1.0)),
+        Ray::new(Vec3::new(2.0, 0.5, -1.0), Vec3::Z), // misses
+        Ray::new(Vec3::new(0.5, 0.5, 2.0), Vec3::Z),  // volume behind
+        Ray::new(Vec3::new(1.0, 0.5, -1.0), Vec3::new(1e-3, 0.0, 1.0)), // grazes the x = 1 face outward
+        Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::new(0.0, 0.0, 1e-30)), // tiny direction is fine
+    ];
+    let (out, _) = both(&m, &rays, &MarchParams::reference(0.05));
+    for (i, p) in out.iter().enumerate().take(rays.len() - 2) {
+        assert!(p.bit_eq(&Rgba::ZERO), "ray {i}: {p:?}");
+    }
+    assert!(out[9].a < 0.01); // enters only at the corner edge region, if at all
+    assert!(out[10].a > 0.5, "a short direction is still a valid ray");
+}
+
+#[test]
+fn far_start_where_t_plus_dt_equals_t() {
+    let data = ball(16, 0.45);
+    let table = ball_tf();
+    let m = VolumeMedium::new(
+        unit_volume(&data, 16),
+        TransferFunction::new(&table, 0.0, 255.0).unwrap(),
+    );
+    let dt = 0.01f32;
+    assert_eq!(1.0e7f32 + dt, 1.0e7f32);
+    let p = MarchParams::reference(dt);
+    // Marching restarts at the entry point, so the far start costs nothing here.
+    let near = one(&m, Ray::new(Vec3::new(0.5, 0.5, -2.0), Vec3::Z), &p);
+    let far = one(&m, Ray::new(Vec3::new(0.5, 0.5, -1.0e7), Vec3::Z), &p);
+    assert!(near.a > 0.1);
+    assert!(near.bit_eq(&far), "{near:?} {far:?}");
+    // So far out that the entry point itself is lost: still a prompt, defined, bounded result.
+    let start = std::time::Instant::now();
+    for o in [-1.0e30f32, -3.0e38] {
+        for d in [Vec3::Z, Vec3::new(1e-30, 0.0, 1.0), Vec3::new(0.0, 0.0, 3.0e38)] {
+            let r = one(&m, Ray::new(Vec3::new(0.5, 0.5, o), d), &p);
+            assert!(
+                r.a.is_finite() && (0.0..=1.0).contains(&r.a) && r.r.is_finite(),
+                "{r:?}"
+            );
+        }
+    }
+    assert!(start.elapsed().as_secs() < 5);
+}
+
+#[test]
+fn infinite_ranges_and_step_caps() {
+    let data = [120u8; 64];
+    let m = small_medium(&data);
+    let p = MarchParams::reference(0.05);
+    let o = Vec3::new(0.5, 0.5, -1.0);
+    let a = one(&m, Ray::new(o, Vec3::Z), &p);
+    let b = one(&m, Ray::with_range(o, Vec3::Z, f32::NEG_INFINITY, f32::INFINITY), &p);
+    assert!(a.bit_eq(&b) && a.a > 0.5);
+    // A tiny step with the default cap: bounded work, counted as truncated.
+    let tiny = MarchParams::reference(1e-9);
+    let (out, st) = both(&m, &[Ray::new(o, Vec3::Z); 3], &tiny);
+    assert_eq!(st.truncated, 3);
+    assert_eq!(st.samples, 3 * DEFAULT_MAX_STEPS as u64);
+    assert!(out[0].a > 0.0 && out[0].a < a.a);
+    let capped = MarchParams {
+        max_steps: 5,
+        ..MarchParams::reference(0.01)
+    };
+    let (_, st) = both(&m, &[Ray::new(o, Vec3::Z)], &capped);
+    assert_eq!((st.samples, st.truncated), (5, 1));
+}
+
+#[test]
+fn empty_volume_and_transparent_transfer_function() {
+    let table = [TfEntry::new([1.0; 3], 1.0)];
+    let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    let rays = test_rays(50);
+    for dims in [[0, 0, 0], [0, 5, 5], [3, 0, 1]] {
+        let vol = Volume::<f32>::new(&[], dims, Vec3::ONE, Vec3::ZERO).unwrap();
+        let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+        grid.classify(&tf);
+        for m in [
+            VolumeMedium::new(vol, tf),
+            VolumeMedium::new(vol, tf).with_grid(&grid).unwrap(),
+        ] {
+            let (out, st) = both(&m, &rays, &MarchParams::reference(0.1));
+            assert!(out.iter().all(|p| p.bit_eq(&Rgba::ZERO)));
+            assert_eq!(st.samples, 0);
+        }
+    }
+    // All-zero opacity: transparent, and with a grid nothing is even sampled.
+    let data = ball(16, 0.4);
+    let vol = unit_volume(&data, 16);
+    let clear = [TfEntry::new([1.0, 0.0, 0.0], 0.0); 4];
+    let tf = TransferFunction::new(&clear, 0.0, 255.0).unwrap();
+    let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    grid.classify(&tf);
+    assert_eq!(grid.empty_fraction(), 1.0);
+    let (out, st) = both(&VolumeMedium::new(vol, tf), &rays, &MarchParams::reference(0.05));
+    assert!(out.iter().all(|p| p.bit_eq(&Rgba::ZERO)) && st.samples > 0);
+    let (out, st) = both(
+        &VolumeMedium::new(vol, tf).with_grid(&grid).unwrap(),
+        &rays,
+        &MarchParams::reference(0.05),
+    );
+    assert!(out.iter().all(|p| p.bit_eq(&Rgba::ZERO)));
+    assert_eq!(st.samples, 0);
+    assert!(st.skipped > 0);
+}
+
+#[test]
+fn non_finite_voxels_are_defined() {
+    let mut data = [0.5f32; 64];
+    data[21] = f32::NAN;
+    data[22] = f32::INFINITY;
+    data[42] = f32::NEG_INFINITY;
+    let vol = unit_volume(&data, 4);
+    let table = [TfEntry::new([0.0, 1.0, 0.0], 0.0), TfEntry::new([1.0, 0.0, 0.0], 2.0)];
+    let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    let mut grid = MacrocellGrid::build(&vol, GridParams { block: 2 }).unwrap();
+    grid.classify(&tf);
+    let rays = test_rays(200);
+    let p = MarchParams::reference(0.02);
+    let (a, _) = both(&VolumeMedium::new(vol, tf), &rays, &p);
+    let (b, _) = both(&VolumeMedium::new(vol, tf).with_grid(&grid).unwrap(), &rays, &p);
+    for (x, y) in a.iter().zip(&b) {
+        assert!(x.bit_eq(y));
+        assert!(x.r.is_finite() && x.g.is_finite() && (0.0..=1.0).contains(&x.a));
+    }
+}
+
+#[test]
+fn zero_copy_from_bytes() {
+    let words: Vec<u32> = (0..8).map(|i| (i as f32 * 0.25).to_bits()).collect();
+    let bytes: &[u8] = bytemuck::cast_slice(&words);
+    let v = Volume::<f32>::from_bytes(bytes, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    assert_eq!(v.data().as_ptr() as usize, bytes.as_ptr() as usize);
+    assert_eq!(v.voxel(1, 1, 1), Some(1.75));
+    let v16 = Volume::<u16>::from_bytes(&bytes[..16], [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    assert_eq!(v16.data().len(), 8);
+    for (off, ty) in [(1usize, 2usize), (2, 4)] {
+        let r = if ty == 2 {
+            Volume::<u16>::from_bytes(&bytes[off..off + 16], [2, 2, 2], Vec3::ONE, Vec3::ZERO).map(|_| ())
+        } else {
+            Volume::<f32>::from_bytes(&bytes[off..off + 8], [2, 1, 1], Vec3::ONE, Vec3::ZERO).map(|_| ())
+        };
+        let e = r.unwrap_err();
+        assert_eq!(e, VolumeError::Misaligned { required: ty });
+        assert!(e.to_string().contains("aligned"));
+    }
+    let e: Box<dyn std::error::Error> = Box::new(VolumeError::StaleGrid);
+    assert!(e.to_string().contains("classify"));
+}
