@@ -17,8 +17,10 @@
 //! [`intersect`] (robust slab test, Möller-Trumbore and watertight ray/triangle tests in scalar,
 //! x4, x8 and packet form), [`composite`] (sort-last compositing: over and depth kernels,
 //! direct-send, binary-swap and radix-k schedules, in-process and MPI transports, a tile queue),
+//! [`build`] (BVH2 builders: object median, binned and full-sweep SAH, LBVH; `validate`, `refit`,
+//! SAH cost), [`traverse`] (scalar BVH2 closest-hit and any-hit reference),
 //! [`math`] (lane types) and [`scene`] (bundled bunny, procedural meshes).
-//! BVH construction, wide BVHs and traversal, volume rendering and compositing follow.
+//! Wide BVHs and their traversal, volume rendering and compositing follow.
 //!
 //! ## Example
 //! ```
@@ -34,7 +36,7 @@
 //! | feature | default | what it adds |
 //! |---|---|---|
 //! | (none) | | all kernels: slab test, triangle tests, Morton codes, volume marching, on caller-provided slices; `#![no_std]`, no allocation |
-//! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); [`volume::MacrocellGrid::build`] in a `Vec`; later the BVH builders |
+//! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); [`volume::MacrocellGrid::build`] in a `Vec`; [`build`] (BVH2 builders, reusable [`build::Builder`] memory) |
 //! | `std` | yes | `alloc`, plus std's float intrinsics in `glam`; threads ([`composite::ThreadTransport`], [`composite::render_tiles`]) |
 //! | `mpi` | | [`composite`]'s `MpiTransport` over the system's MPI library (`libopenmpi-dev`, `libclang-dev`) |
 //!
@@ -43,6 +45,8 @@
 //! |---|---|---|
 //! | slab test | conservative far bound `far + \|far\| 2 gamma(3)` | [`intersect::aabb::FAR_SLACK`] |
 //! | Morton codes | bits per axis (10 or 21), quantisation bounds | [`geometry::morton::MortonQuantizer`] |
+//! | BVH2 build | strategy, `C_T`, `C_I`, leaf sizes, bins, binned axes, Morton bits, depth bound | [`build::BuildParams`] (`fastest`, `fast`, `balanced`, `quality`, `median`) |
+//! | BVH2 traversal | stack entries, deepest tree traversed without fallback | [`traverse::STACK_SIZE`], [`traverse::MAX_DEPTH`] |
 //! | volume marching | step, endpoint / midpoint sampling, early-termination epsilon, step cap | [`volume::MarchParams`] (`reference`, `quality`, `fast`) |
 //! | transfer function | table, scalar range, reference step of authored opacities | [`volume::TransferFunction`], [`volume::TfEntry::from_rgba_premultiplied`] |
 //! | empty-space skipping | macrocell block size | [`volume::GridParams`] (`fine`, default, `coarse`) |
@@ -61,12 +65,16 @@ extern crate alloc;
 #[cfg(feature = "std")]
 extern crate std;
 
+#[cfg(feature = "alloc")]
+pub mod build;
 pub mod composite;
 pub mod geometry;
 pub mod intersect;
+pub mod layout;
 pub mod math;
 #[cfg(feature = "alloc")]
 pub mod scene;
+pub mod traverse;
 pub mod volume;
 
 pub use geometry::{Aabb, Hit, Ray};

@@ -1,5 +1,7 @@
 //! Built-in scenes for tests, benches and examples: the bundled Stanford bunny, an OBJ reader, and
-//! procedural meshes (icosphere, triangle fan), plus a small deterministic random number generator.
+//! procedural meshes (icosphere, triangle fan; for the BVH builders a thin-triangle soup, a
+//! clustered soup, a fractal terrain and Haines' sphereflake), plus a small deterministic random
+//! number generator.
 //!
 //! Needs the `alloc` feature. Generated meshes share vertices through indices, so edges shared by
 //! two triangles are bit-identical in both: exactly what the watertightness tests need.
@@ -8,6 +10,9 @@ use alloc::vec::Vec;
 use glam::Vec3;
 
 use crate::geometry::{IndexedMesh, Triangle, Triangles};
+
+mod procedural;
+pub use procedural::{clustered_soup, sphereflake, terrain, thin_soup};
 
 /// An owned indexed triangle mesh.
 ///

@@ -1,0 +1,488 @@
+//! Embree 3 through its C API, for benchmarks only (feature `embree`; Debian's `libembree-dev`).
+//!
+//! Hand-written bindings for the few calls the benches need: a triangle scene with
+//! `rtcIntersect1` / `rtcOccluded1` / `rtcIntersect8`, and `rtcBuildBVH` (Embree's own builder over
+//! user boxes) whose tree is handed back through callbacks so its SAH cost can be computed the same
+//! way as strahl's. The device runs with one thread (`threads=1`), as strahl's builders do.
+#![allow(dead_code, non_camel_case_types, non_snake_case, clippy::upper_case_acronyms)]
+
+use std::ffi::{CString, c_char, c_uint, c_void};
+use std::ptr::{null, null_mut};
+use strahl::{Aabb, Ray, Vec3};
+
+type RTCDevice = *mut c_void;
+type RTCScene = *mut c_void;
+type RTCGeometry = *mut c_void;
+type RTCBVH = *mut c_void;
+type RTCThreadLocalAllocator = *mut c_void;
+
+const RTC_GEOMETRY_TYPE_TRIANGLE: c_uint = 0;
+const RTC_BUFFER_TYPE_INDEX: c_uint = 0;
+const RTC_BUFFER_TYPE_VERTEX: c_uint = 1;
+const RTC_FORMAT_UINT3: c_uint = 0x5003;
+const RTC_FORMAT_FLOAT3: c_uint = 0x9003;
+const RTC_INVALID_GEOMETRY_ID: c_uint = u32::MAX;
+
+/// Embree's build quality levels.
+#[derive(Clone, Copy, Debug)]
+#[repr(u32)]
+pub enum Quality {
+    /// Morton-code builder.
+    Low = 0,
+    /// Binned SAH.
+    Medium = 1,
+    /// Binned SAH with spatial splits (scenes) / higher quality (rtcBuildBVH).
+    High = 2,
+}
+
+#[repr(C)]
+struct RTCIntersectContext {
+    flags: c_uint,
+    filter: *const c_void,
+    inst_id: [c_uint; 1],
+}
+
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RTCRay {
+    org: [f32; 3],
+    tnear: f32,
+    dir: [f32; 3],
+    time: f32,
+    tfar: f32,
+    mask: c_uint,
+    id: c_uint,
+    flags: c_uint,
+}
+
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RTCHit {
+    ng: [f32; 3],
+    u: f32,
+    v: f32,
+    prim_id: c_uint,
+    geom_id: c_uint,
+    inst_id: [c_uint; 1],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct RTCRayHit {
+    ray: RTCRay,
+    hit: RTCHit,
+}
+
+#[repr(C, align(32))]
+struct RTCRayHit8 {
+    org_x: [f32; 8],
+    org_y: [f32; 8],
+    org_z: [f32; 8],
+    tnear: [f32; 8],
+    dir_x: [f32; 8],
+    dir_y: [f32; 8],
+    dir_z: [f32; 8],
+    time: [f32; 8],
+    tfar: [f32; 8],
+    mask: [c_uint; 8],
+    id: [c_uint; 8],
+    flags: [c_uint; 8],
+    ng_x: [f32; 8],
+    ng_y: [f32; 8],
+    ng_z: [f32; 8],
+    u: [f32; 8],
+    v: [f32; 8],
+    prim_id: [c_uint; 8],
+    geom_id: [c_uint; 8],
+    inst_id: [c_uint; 8],
+}
+
+#[repr(C, align(32))]
+#[derive(Clone, Copy)]
+struct RTCBuildPrimitive {
+    lower: [f32; 3],
+    geom_id: c_uint,
+    upper: [f32; 3],
+    prim_id: c_uint,
+}
+
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RTCBounds {
+    lower: [f32; 3],
+    align0: f32,
+    upper: [f32; 3],
+    align1: f32,
+}
+
+type CreateNode = extern "C" fn(RTCThreadLocalAllocator, c_uint, *mut c_void) -> *mut c_void;
+type SetChildren = extern "C" fn(*mut c_void, *mut *mut c_void, c_uint, *mut c_void);
+type SetBounds = extern "C" fn(*mut c_void, *const *const RTCBounds, c_uint, *mut c_void);
+type CreateLeaf = extern "C" fn(RTCThreadLocalAllocator, *const RTCBuildPrimitive, usize, *mut c_void) -> *mut c_void;
+
+#[repr(C)]
+struct RTCBuildArguments {
+    byte_size: usize,
+    build_quality: c_uint,
+    build_flags: c_uint,
+    max_branching_factor: c_uint,
+    max_depth: c_uint,
+    sah_block_size: c_uint,
+    min_leaf_size: c_uint,
+    max_leaf_size: c_uint,
+    traversal_cost: f32,
+    intersection_cost: f32,
+    bvh: RTCBVH,
+    primitives: *mut RTCBuildPrimitive,
+    primitive_count: usize,
+    primitive_array_capacity: usize,
+    create_node: Option<CreateNode>,
+    set_node_children: Option<SetChildren>,
+    set_node_bounds: Option<SetBounds>,
+    create_leaf: Option<CreateLeaf>,
+    split_primitive: *const c_void,
+    build_progress: *const c_void,
+    user_ptr: *mut c_void,
+}
+
+#[link(name = "embree3")]
+unsafe extern "C" {
+    fn rtcNewDevice(config: *const c_char) -> RTCDevice;
+    fn rtcReleaseDevice(device: RTCDevice);
+    fn rtcGetDeviceError(device: RTCDevice) -> c_uint;
+    fn rtcNewScene(device: RTCDevice) -> RTCScene;
+    fn rtcReleaseScene(scene: RTCScene);
+    fn rtcSetSceneBuildQuality(scene: RTCScene, quality: c_uint);
+    fn rtcCommitScene(scene: RTCScene);
+    fn rtcNewGeometry(device: RTCDevice, ty: c_uint) -> RTCGeometry;
+    fn rtcReleaseGeometry(geometry: RTCGeometry);
+    fn rtcCommitGeometry(geometry: RTCGeometry);
+    fn rtcSetGeometryBuildQuality(geometry: RTCGeometry, quality: c_uint);
+    fn rtcSetNewGeometryBuffer(
+        geometry: RTCGeometry,
+        ty: c_uint,
+        slot: c_uint,
+        format: c_uint,
+        stride: usize,
+        count: usize,
+    ) -> *mut c_void;
+    fn rtcAttachGeometry(scene: RTCScene, geometry: RTCGeometry) -> c_uint;
+    fn rtcIntersect1(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
+    fn rtcOccluded1(scene: RTCScene, ctx: *mut RTCIntersectContext, ray: *mut RTCRay);
+    fn rtcIntersect8(valid: *const i32, scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit8);
+    fn rtcNewBVH(device: RTCDevice) -> RTCBVH;
+    fn rtcBuildBVH(args: *const RTCBuildArguments) -> *mut c_void;
+    fn rtcThreadLocalAlloc(alloc: RTCThreadLocalAllocator, bytes: usize, align: usize) -> *mut c_void;
+    fn rtcReleaseBVH(bvh: RTCBVH);
+}
+
+fn context() -> RTCIntersectContext {
+    RTCIntersectContext {
+        flags: 0,
+        filter: null(),
+        inst_id: [RTC_INVALID_GEOMETRY_ID],
+    }
+}
+
+/// An Embree device with one thread.
+pub struct Device(RTCDevice);
+
+impl Device {
+    /// A device restricted to one build and render thread.
+    pub fn single_threaded() -> Self {
+        let cfg = CString::new("threads=1").expect("no NUL");
+        // SAFETY: a valid NUL-terminated config string; Embree returns null on failure (checked).
+        let d = unsafe { rtcNewDevice(cfg.as_ptr()) };
+        assert!(!d.is_null(), "rtcNewDevice failed");
+        Self(d)
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: the device was created by rtcNewDevice and is released once.
+        unsafe { rtcReleaseDevice(self.0) }
+    }
+}
+
+/// A committed triangle scene.
+pub struct Scene<'d> {
+    scene: RTCScene,
+    _device: &'d Device,
+}
+
+impl<'d> Scene<'d> {
+    /// Builds Embree's BVH over `tris` (one triangle mesh) with `quality`.
+    pub fn new(device: &'d Device, tris: &[[Vec3; 3]], quality: Quality) -> Self {
+        // SAFETY: standard Embree scene setup on a live device; the buffers Embree allocates are
+        // written within their sizes (3 floats per vertex, 3 u32 per triangle) before commit.
+        unsafe {
+            let scene = rtcNewScene(device.0);
+            rtcSetSceneBuildQuality(scene, quality as c_uint);
+            let geom = rtcNewGeometry(device.0, RTC_GEOMETRY_TYPE_TRIANGLE);
+            rtcSetGeometryBuildQuality(geom, quality as c_uint);
+            let vb = rtcSetNewGeometryBuffer(
+                geom,
+                RTC_BUFFER_TYPE_VERTEX,
+                0,
+                RTC_FORMAT_FLOAT3,
+                12,
+                tris.len() * 3 + 1,
+            ) as *mut f32;
+            let ib =
+                rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, tris.len()) as *mut u32;
+            assert!(!vb.is_null() && !ib.is_null(), "Embree buffer allocation failed");
+            let v = std::slice::from_raw_parts_mut(vb, tris.len() * 9);
+            let idx = std::slice::from_raw_parts_mut(ib, tris.len() * 3);
+            for (i, t) in tris.iter().enumerate() {
+                for (j, p) in t.iter().enumerate() {
+                    v[i * 9 + j * 3..i * 9 + j * 3 + 3].copy_from_slice(&p.to_array());
+                    idx[i * 3 + j] = (i * 3 + j) as u32;
+                }
+            }
+            rtcCommitGeometry(geom);
+            rtcAttachGeometry(scene, geom);
+            rtcReleaseGeometry(geom);
+            rtcCommitScene(scene);
+            assert_eq!(rtcGetDeviceError(device.0), 0, "Embree reported an error");
+            Self { scene, _device: device }
+        }
+    }
+
+    fn ray(r: &Ray) -> RTCRay {
+        RTCRay {
+            org: r.origin.to_array(),
+            tnear: r.tmin,
+            dir: r.direction.to_array(),
+            time: 0.0,
+            tfar: r.tmax,
+            mask: u32::MAX,
+            id: 0,
+            flags: 0,
+        }
+    }
+
+    /// Closest hit: `(t, primitive)`.
+    #[inline]
+    pub fn intersect1(&self, r: &Ray) -> Option<(f32, u32)> {
+        let mut rh = RTCRayHit {
+            ray: Self::ray(r),
+            hit: RTCHit {
+                ng: [0.0; 3],
+                u: 0.0,
+                v: 0.0,
+                prim_id: 0,
+                geom_id: RTC_INVALID_GEOMETRY_ID,
+                inst_id: [0],
+            },
+        };
+        let mut ctx = context();
+        // SAFETY: `rh` and `ctx` are valid, aligned, initialised structs for the call's duration.
+        unsafe { rtcIntersect1(self.scene, &mut ctx, &mut rh) };
+        (rh.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((rh.ray.tfar, rh.hit.prim_id))
+    }
+
+    /// Any hit in `[tmin, tmax]`.
+    #[inline]
+    pub fn occluded1(&self, r: &Ray) -> bool {
+        let mut ray = Self::ray(r);
+        let mut ctx = context();
+        // SAFETY: as in `intersect1`.
+        unsafe { rtcOccluded1(self.scene, &mut ctx, &mut ray) };
+        ray.tfar == f32::NEG_INFINITY
+    }
+
+    /// Eight rays as one packet: `(t, primitive)` per lane.
+    pub fn intersect8(&self, rays: &[Ray]) -> [Option<(f32, u32)>; 8] {
+        let mut valid = [0i32; 8];
+        // SAFETY: an all-zero RTCRayHit8 is a valid value (plain floats and integers).
+        let mut rh: RTCRayHit8 = unsafe { std::mem::zeroed() };
+        for (i, r) in rays.iter().take(8).enumerate() {
+            valid[i] = -1;
+            [rh.org_x[i], rh.org_y[i], rh.org_z[i]] = r.origin.to_array();
+            [rh.dir_x[i], rh.dir_y[i], rh.dir_z[i]] = r.direction.to_array();
+            rh.tnear[i] = r.tmin;
+            rh.tfar[i] = r.tmax;
+            rh.mask[i] = u32::MAX;
+            rh.geom_id[i] = RTC_INVALID_GEOMETRY_ID;
+        }
+        let mut ctx = context();
+        ctx.flags = 1; // coherent
+        // SAFETY: `valid` has 8 ints, `rh` is 32-byte aligned and initialised.
+        unsafe { rtcIntersect8(valid.as_ptr(), self.scene, &mut ctx, &mut rh) };
+        std::array::from_fn(|i| (rh.geom_id[i] != RTC_INVALID_GEOMETRY_ID).then_some((rh.tfar[i], rh.prim_id[i])))
+    }
+}
+
+impl Drop for Scene<'_> {
+    fn drop(&mut self) {
+        // SAFETY: created by rtcNewScene, released once.
+        unsafe { rtcReleaseScene(self.scene) }
+    }
+}
+
+// ---- rtcBuildBVH: Embree's builder over boxes, the tree handed back through callbacks ----
+
+#[repr(C)]
+struct Inner {
+    is_leaf: u32,
+    bounds: [RTCBounds; 2],
+    children: [*mut c_void; 2],
+}
+
+#[repr(C)]
+struct Leaf {
+    is_leaf: u32,
+    count: u32,
+}
+
+extern "C" fn create_node(alloc: RTCThreadLocalAllocator, count: c_uint, _: *mut c_void) -> *mut c_void {
+    debug_assert_eq!(count, 2);
+    // SAFETY: Embree's allocator returns memory of the requested size and alignment, owned by the BVH.
+    unsafe {
+        let p = rtcThreadLocalAlloc(alloc, std::mem::size_of::<Inner>(), 16) as *mut Inner;
+        p.write(Inner {
+            is_leaf: 0,
+            bounds: [std::mem::zeroed(); 2],
+            children: [null_mut(); 2],
+        });
+        p as *mut c_void
+    }
+}
+
+extern "C" fn set_children(node: *mut c_void, children: *mut *mut c_void, count: c_uint, _: *mut c_void) {
+    // SAFETY: `node` is an `Inner` we created; Embree passes `count` (2) child pointers.
+    unsafe {
+        let n = &mut *(node as *mut Inner);
+        for i in 0..count.min(2) as usize {
+            n.children[i] = *children.add(i);
+        }
+    }
+}
+
+extern "C" fn set_bounds(node: *mut c_void, bounds: *const *const RTCBounds, count: c_uint, _: *mut c_void) {
+    // SAFETY: as in `set_children`, with `count` bounds pointers.
+    unsafe {
+        let n = &mut *(node as *mut Inner);
+        for i in 0..count.min(2) as usize {
+            n.bounds[i] = **bounds.add(i);
+        }
+    }
+}
+
+extern "C" fn create_leaf(
+    alloc: RTCThreadLocalAllocator,
+    _prims: *const RTCBuildPrimitive,
+    count: usize,
+    _: *mut c_void,
+) -> *mut c_void {
+    // SAFETY: as in `create_node`.
+    unsafe {
+        let p = rtcThreadLocalAlloc(alloc, std::mem::size_of::<Leaf>(), 16) as *mut Leaf;
+        p.write(Leaf {
+            is_leaf: 1,
+            count: count as u32,
+        });
+        p as *mut c_void
+    }
+}
+
+/// What `rtcBuildBVH` made: its SAH cost (same normalisation as strahl: node and leaf costs
+/// weighted by surface area over the root's), nodes and leaves.
+#[derive(Clone, Copy, Debug)]
+pub struct BuiltBvh {
+    /// SAH cost with the given `C_T`, `C_I`.
+    pub sah: f64,
+    /// Interior nodes.
+    pub inner: usize,
+    /// Leaves.
+    pub leaves: usize,
+}
+
+fn half_area(b: &RTCBounds) -> f64 {
+    let d = [0, 1, 2].map(|a| (b.upper[a] - b.lower[a]).max(0.0) as f64);
+    d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+}
+
+/// Builds a binary BVH over `boxes` with Embree's `rtcBuildBVH` (`quality`, leaves of 1 to
+/// `max_leaf` primitives, costs `c_t`, `c_i`), returning its SAH cost. `boxes` must be valid.
+pub fn build_bvh(device: &Device, boxes: &[Aabb], quality: Quality, max_leaf: u32, c_t: f32, c_i: f32) -> BuiltBvh {
+    let mut prims: Vec<RTCBuildPrimitive> = boxes
+        .iter()
+        .enumerate()
+        .map(|(i, b)| RTCBuildPrimitive {
+            lower: b.min.to_array(),
+            geom_id: 0,
+            upper: b.max.to_array(),
+            prim_id: i as u32,
+        })
+        .collect();
+    let count = prims.len();
+    // Spatial splits (HIGH) need spare capacity; we do not provide a split callback, so keep it at count.
+    prims.reserve(count);
+    // SAFETY: `prims` outlives the build; the callbacks only touch memory from Embree's allocator;
+    // the BVH (and its nodes) is released after the tree is read.
+    unsafe {
+        let bvh = rtcNewBVH(device.0);
+        let args = RTCBuildArguments {
+            byte_size: std::mem::size_of::<RTCBuildArguments>(),
+            build_quality: quality as c_uint,
+            build_flags: 0,
+            max_branching_factor: 2,
+            max_depth: 1024,
+            sah_block_size: 1,
+            min_leaf_size: 1,
+            max_leaf_size: max_leaf,
+            traversal_cost: c_t,
+            intersection_cost: c_i,
+            bvh,
+            primitives: prims.as_mut_ptr(),
+            primitive_count: count,
+            primitive_array_capacity: prims.capacity(),
+            create_node: Some(create_node),
+            set_node_children: Some(set_children),
+            set_node_bounds: Some(set_bounds),
+            create_leaf: Some(create_leaf),
+            split_primitive: null(),
+            build_progress: null(),
+            user_ptr: null_mut(),
+        };
+        let root = rtcBuildBVH(&args);
+        let root_box = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(b));
+        let root_area = {
+            let b = RTCBounds {
+                lower: root_box.min.to_array(),
+                align0: 0.0,
+                upper: root_box.max.to_array(),
+                align1: 0.0,
+            };
+            half_area(&b).max(f64::MIN_POSITIVE)
+        };
+        let mut out = BuiltBvh {
+            sah: 0.0,
+            inner: 0,
+            leaves: 0,
+        };
+        // (node, half area of its box)
+        let mut stack: Vec<(*mut c_void, f64)> = vec![(root, root_area)];
+        while let Some((n, area)) = stack.pop() {
+            if n.is_null() {
+                continue;
+            }
+            if *(n as *const u32) == 1 {
+                let leaf = &*(n as *const Leaf);
+                out.leaves += 1;
+                out.sah += c_i as f64 * leaf.count as f64 * area / root_area;
+            } else {
+                let inner = &*(n as *const Inner);
+                out.inner += 1;
+                out.sah += c_t as f64 * area / root_area;
+                for i in 0..2 {
+                    stack.push((inner.children[i], half_area(&inner.bounds[i])));
+                }
+            }
+        }
+        rtcReleaseBVH(bvh);
+        out
+    }
+}

@@ -1,0 +1,411 @@
+//! Single-ray tracing, single thread: the scalar BVH2 reference, BVH4 and BVH8 against the `bvh`
+//! crate, `obvhs` (CWBVH) and, with `--features embree`, Embree 3's `rtcIntersect1` /
+//! `rtcOccluded1`, all in one group per scene and ray kind so the ratios come from one run.
+//!
+//! Rays: `primary` (a 1024 x 1024 pinhole camera, closest hit), `diffuse` (cosine-distributed
+//! directions from random surface points, closest hit), `shadow` (from surface points towards
+//! random points in the scene's box, any hit with `tmax` = the distance). Scenes: the bundled
+//! bunny and a 1.05M-triangle sphereflake. Every contender uses the same Möller-Trumbore test on
+//! the same triangles (the peers' BVHs with strahl's scalar triangle test; Embree its own), and
+//! their hit counts are checked against each other before timing.
+//!
+//! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree).
+
+#[path = "peers/mod.rs"]
+mod peers;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use std::hint::black_box;
+use std::time::Instant;
+use strahl::build::{BuildParams, Bvh2};
+use strahl::geometry::Triangle;
+use strahl::intersect::{PreparedRay, moller};
+use strahl::layout::{Bvh4, Bvh8};
+use strahl::scene::{self, Rng};
+use strahl::traverse::Moller;
+use strahl::{Aabb, Ray, Vec3};
+
+struct BvhCrateTri {
+    a: nalgebra::Point3<f32>,
+    b: nalgebra::Point3<f32>,
+    c: nalgebra::Point3<f32>,
+    node: usize,
+}
+
+impl bvh::aabb::Bounded<f32, 3> for BvhCrateTri {
+    fn aabb(&self) -> bvh::aabb::Aabb<f32, 3> {
+        bvh::aabb::Aabb::empty().grow(&self.a).grow(&self.b).grow(&self.c)
+    }
+}
+
+impl bvh::bounding_hierarchy::BHShape<f32, 3> for BvhCrateTri {
+    fn set_bh_node_index(&mut self, i: usize) {
+        self.node = i;
+    }
+    fn bh_node_index(&self) -> usize {
+        self.node
+    }
+}
+
+struct Contenders {
+    tris: Vec<Triangle>,
+    bvh2: Bvh2,
+    bvh4: Bvh4,
+    bvh8: Bvh8,
+    peer_bvh: bvh::bvh::Bvh<f32, 3>,
+    peer_bvh_shapes: Vec<BvhCrateTri>,
+    obvhs: obvhs::cwbvh::CwBvh,
+}
+
+fn build(tris: Vec<Triangle>) -> Contenders {
+    let t0 = Instant::now();
+    let (bvh2, _) = Bvh2::build(&tris[..], &BuildParams::default()).expect("build");
+    let bvh4 = Bvh4::from_bvh2(&bvh2, &tris[..]).expect("collapse");
+    let bvh8 = Bvh8::from_bvh2(&bvh2, &tris[..]).expect("collapse");
+    let strahl_s = t0.elapsed().as_secs_f64();
+    let p = |v: Vec3| nalgebra::Point3::new(v.x, v.y, v.z);
+    let mut peer_bvh_shapes: Vec<BvhCrateTri> = tris
+        .iter()
+        .map(|t| BvhCrateTri {
+            a: p(t[0]),
+            b: p(t[1]),
+            c: p(t[2]),
+            node: 0,
+        })
+        .collect();
+    let t0 = Instant::now();
+    let peer_bvh = bvh::bvh::Bvh::build(&mut peer_bvh_shapes);
+    let bvh_s = t0.elapsed().as_secs_f64();
+    let otris: Vec<obvhs::triangle::Triangle> = tris
+        .iter()
+        .map(|t| obvhs::triangle::Triangle {
+            v0: t[0].into(),
+            v1: t[1].into(),
+            v2: t[2].into(),
+        })
+        .collect();
+    let t0 = Instant::now();
+    let obvhs = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+        &otris,
+        obvhs::BvhBuildParams::medium_build(),
+        &mut std::time::Duration::default(),
+    );
+    let obvhs_s = t0.elapsed().as_secs_f64();
+    println!(
+        "{} triangles; build: strahl binned SAH + collapse {:.0} ms, bvh crate {:.0} ms, obvhs medium {:.0} ms",
+        tris.len(),
+        strahl_s * 1e3,
+        bvh_s * 1e3,
+        obvhs_s * 1e3
+    );
+    Contenders {
+        tris,
+        bvh2,
+        bvh4,
+        bvh8,
+        peer_bvh,
+        peer_bvh_shapes,
+        obvhs,
+    }
+}
+
+fn bounds(tris: &[Triangle]) -> Aabb {
+    tris.iter().flatten().fold(Aabb::EMPTY, |mut b, v| {
+        b.grow(*v);
+        b
+    })
+}
+
+fn primary_rays(b: &Aabb, w: u32, h: u32) -> Vec<Ray> {
+    let c = b.centroid();
+    let r = (b.max - b.min).length() * 0.5;
+    let eye = c + Vec3::new(0.55, 0.35, 1.0).normalize() * r * 2.6;
+    let fw = (c - eye).normalize();
+    let right = fw.cross(Vec3::Y).normalize() * 0.45;
+    let up = right.normalize().cross(fw) * 0.45;
+    // In 4 x 2 pixel blocks, so that packets of 8 consecutive rays are coherent tiles.
+    (0..w * h)
+        .map(|i| {
+            let (block, j) = (i / 8, i % 8);
+            let (bx, by) = (block % (w / 4), block / (w / 4));
+            let (x, y) = (bx * 4 + j % 4, by * 2 + j / 4);
+            let u = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
+            let v = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
+            Ray::new(eye, fw + right * u + up * v)
+        })
+        .collect()
+}
+
+/// `n` random points on the surface with their (geometric) normals.
+fn surface_points(tris: &[Triangle], n: usize, rng: &mut Rng) -> Vec<(Vec3, Vec3)> {
+    (0..n)
+        .filter_map(|_| {
+            let t = tris[(rng.u64() % tris.len() as u64) as usize];
+            let (mut u, mut v) = (rng.f32(), rng.f32());
+            if u + v > 1.0 {
+                (u, v) = (1.0 - u, 1.0 - v);
+            }
+            let p = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
+            let nrm = (t[1] - t[0]).cross(t[2] - t[0]).try_normalize()?;
+            Some((p, nrm))
+        })
+        .collect()
+}
+
+fn diffuse_rays(tris: &[Triangle], n: usize, scale: f32) -> Vec<Ray> {
+    let mut rng = Rng::new(5);
+    surface_points(tris, n, &mut rng)
+        .into_iter()
+        .map(|(p, nrm)| {
+            let mut d = rng.unit_vector();
+            if d.dot(nrm) < 0.0 {
+                d = -d;
+            }
+            Ray::new(p + nrm * scale * 1e-5, (d + nrm).normalize_or(nrm))
+        })
+        .collect()
+}
+
+fn shadow_rays(tris: &[Triangle], b: &Aabb, n: usize, scale: f32) -> Vec<Ray> {
+    let mut rng = Rng::new(6);
+    surface_points(tris, n, &mut rng)
+        .into_iter()
+        .map(|(p, nrm)| {
+            let o = p + nrm * scale * 1e-5;
+            let target = b.min + (b.max - b.min) * Vec3::new(rng.f32(), rng.f32(), rng.f32());
+            let d = target - o;
+            Ray::with_range(o, d, 0.0, 1.0)
+        })
+        .collect()
+}
+
+// ---- the contenders' loops: each returns a checksum (hit count) so nothing is optimised away ----
+
+fn run_bvh2(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter()
+        .filter(|r| c.bvh2.intersect::<Moller, _>(&c.tris[..], r).is_some())
+        .count()
+}
+
+fn run_bvh4(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter().filter(|r| c.bvh4.intersect::<Moller>(r).is_some()).count()
+}
+
+fn run_bvh8(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter().filter(|r| c.bvh8.intersect::<Moller>(r).is_some()).count()
+}
+
+fn run_bvh_crate(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter()
+        .filter(|r| {
+            let q = bvh::ray::Ray::new(
+                nalgebra::Point3::new(r.origin.x, r.origin.y, r.origin.z),
+                nalgebra::Vector3::new(r.direction.x, r.direction.y, r.direction.z),
+            );
+            let mut pr = PreparedRay::new(r);
+            let mut hit = false;
+            for s in c.peer_bvh.traverse_iterator(&q, &c.peer_bvh_shapes) {
+                let tri = [
+                    Vec3::new(s.a.x, s.a.y, s.a.z),
+                    Vec3::new(s.b.x, s.b.y, s.b.z),
+                    Vec3::new(s.c.x, s.c.y, s.c.z),
+                ];
+                if let Some(h) = moller::intersect_scalar(&pr, &tri, 0) {
+                    pr.tmax = h.t;
+                    hit = true;
+                }
+            }
+            hit
+        })
+        .count()
+}
+
+fn obvhs_ray(r: &Ray) -> obvhs::ray::Ray {
+    obvhs::ray::Ray::new(r.origin.into(), r.direction.into(), r.tmin, r.tmax)
+}
+
+fn run_obvhs(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter()
+        .filter(|r| {
+            let pr = PreparedRay::new(r);
+            let mut hit = obvhs::ray::RayHit::none();
+            c.obvhs.ray_traverse(obvhs_ray(r), &mut hit, |ray, id| {
+                let tri = c.tris[c.obvhs.primitive_indices[id] as usize];
+                let mut p = pr;
+                p.tmax = ray.tmax;
+                moller::intersect_scalar(&p, &tri, 0).map_or(f32::INFINITY, |h| h.t)
+            })
+        })
+        .count()
+}
+
+fn run_packet8(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut hits = vec![None; rays.len()];
+    strahl::traverse::packet::intersect_batch::<Moller, _, 8>(c.bvh8.view(), rays, &mut hits, 0);
+    hits.iter().filter(|h| h.is_some()).count()
+}
+
+fn run_hybrid8(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut hits = vec![None; rays.len()];
+    strahl::traverse::packet::intersect_batch::<Moller, _, 8>(
+        c.bvh8.view(),
+        rays,
+        &mut hits,
+        strahl::traverse::packet::DEFAULT_SWITCH,
+    );
+    hits.iter().filter(|h| h.is_some()).count()
+}
+
+fn run_packet8_occluded(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut occ = [false; 8];
+    rays.chunks(8)
+        .map(|r| {
+            strahl::traverse::packet::occluded8::<Moller, _, 8>(c.bvh8.view(), r, &mut occ);
+            occ[..r.len()].iter().filter(|&&o| o).count()
+        })
+        .sum()
+}
+
+fn run_bvh2_occluded(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter()
+        .filter(|r| c.bvh2.occluded::<Moller, _>(&c.tris[..], r))
+        .count()
+}
+
+fn run_bvh4_occluded(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter().filter(|r| c.bvh4.occluded::<Moller>(r)).count()
+}
+
+fn run_bvh8_occluded(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter().filter(|r| c.bvh8.occluded::<Moller>(r)).count()
+}
+
+fn run_bvh_crate_occluded(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter()
+        .filter(|r| {
+            let q = bvh::ray::Ray::new(
+                nalgebra::Point3::new(r.origin.x, r.origin.y, r.origin.z),
+                nalgebra::Vector3::new(r.direction.x, r.direction.y, r.direction.z),
+            );
+            let pr = PreparedRay::new(r);
+            c.peer_bvh.traverse_iterator(&q, &c.peer_bvh_shapes).any(|s| {
+                let tri = [
+                    Vec3::new(s.a.x, s.a.y, s.a.z),
+                    Vec3::new(s.b.x, s.b.y, s.b.z),
+                    Vec3::new(s.c.x, s.c.y, s.c.z),
+                ];
+                moller::intersect_scalar(&pr, &tri, 0).is_some()
+            })
+        })
+        .count()
+}
+
+fn run_obvhs_occluded(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter()
+        .filter(|r| {
+            let pr = PreparedRay::new(r);
+            !c.obvhs.ray_traverse_miss(obvhs_ray(r), |_, id| {
+                let tri = c.tris[c.obvhs.primitive_indices[id] as usize];
+                moller::intersect_scalar(&pr, &tri, 0).map_or(f32::INFINITY, |h| h.t)
+            })
+        })
+        .count()
+}
+
+type Run = fn(&Contenders, &[Ray]) -> usize;
+
+fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
+    println!("\n== scene {name}");
+    let c = build(tris);
+    let b = bounds(&c.tris);
+    let scale = (b.max - b.min).length();
+    let kinds: [(&str, Vec<Ray>, bool); 3] = [
+        ("primary", primary_rays(&b, 1024, 1024), false),
+        ("diffuse", diffuse_rays(&c.tris, 1 << 18, scale), false),
+        ("shadow", shadow_rays(&c.tris, &b, 1 << 18, scale), true),
+    ];
+    #[cfg(feature = "embree")]
+    let device = peers::embree::Device::single_threaded();
+    #[cfg(feature = "embree")]
+    let embree = peers::embree::Scene::new(&device, &c.tris, peers::embree::Quality::Medium);
+
+    for (kind, rays, any_hit) in &kinds {
+        let members: Vec<(&str, Run)> = if *any_hit {
+            vec![
+                ("bvh2_scalar", run_bvh2_occluded),
+                ("bvh4", run_bvh4_occluded),
+                ("bvh8", run_bvh8_occluded),
+                ("packet8_bvh8", run_packet8_occluded),
+                ("bvh_crate", run_bvh_crate_occluded),
+                ("obvhs", run_obvhs_occluded),
+            ]
+        } else {
+            vec![
+                ("bvh2_scalar", run_bvh2),
+                ("bvh4", run_bvh4),
+                ("bvh8", run_bvh8),
+                ("packet8_bvh8", run_packet8),
+                ("hybrid8_bvh8", run_hybrid8),
+                ("bvh_crate", run_bvh_crate),
+                ("obvhs", run_obvhs),
+            ]
+        };
+        // The same answers before timing: strahl's trees exactly, peers to within 0.1%.
+        let reference = members[0].1(&c, rays);
+        for (m, f) in &members[1..] {
+            let got = f(&c, rays);
+            let ours = (m.starts_with("bvh") && !m.contains("crate")) || m.contains("8_bvh8");
+            let tol = if ours { 0 } else { rays.len() / 1000 + 1 };
+            assert!(
+                got.abs_diff(reference) <= tol,
+                "{name}/{kind}: {m} hits {got}, bvh2 {reference}"
+            );
+        }
+        println!(
+            "{name}/{kind}: {} rays, {} hit ({:.1}%)",
+            rays.len(),
+            reference,
+            reference as f64 * 100.0 / rays.len() as f64
+        );
+
+        let mut g = cr.benchmark_group(format!("trace/{name}/{kind}"));
+        g.sample_size(10);
+        g.warm_up_time(std::time::Duration::from_millis(500));
+        g.measurement_time(std::time::Duration::from_secs(3));
+        g.throughput(Throughput::Elements(rays.len() as u64));
+        for (m, f) in &members {
+            g.bench_function(*m, |bch| bch.iter(|| f(black_box(&c), black_box(rays))));
+        }
+        #[cfg(feature = "embree")]
+        {
+            let e = &embree;
+            let got = if *any_hit {
+                rays.iter().filter(|r| e.occluded1(r)).count()
+            } else {
+                rays.iter().filter(|r| e.intersect1(r).is_some()).count()
+            };
+            assert!(
+                got.abs_diff(reference) <= rays.len() / 1000 + 1,
+                "{name}/{kind}: embree hits {got}, bvh2 {reference}"
+            );
+            if *any_hit {
+                g.bench_function("embree_rtcOccluded1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| e.occluded1(r)).count())
+                });
+            } else {
+                g.bench_function("embree_rtcIntersect1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| e.intersect1(r).is_some()).count())
+                });
+            }
+        }
+        g.finish();
+    }
+}
+
+fn benches(c: &mut Criterion) {
+    bench_scene(c, "bunny", scene::bunny().to_soup());
+    bench_scene(c, "sphereflake_1m", scene::sphereflake(3, 3).to_soup());
+}
+
+criterion_group!(trace, benches);
+criterion_main!(trace);

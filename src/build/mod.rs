@@ -1,0 +1,245 @@
+//! BVH2 construction: [`Bvh2`] and its builders (object median, full-sweep SAH, binned SAH,
+//! LBVH), [`Bvh2::validate`], [`Bvh2::refit`] and [`Bvh2::sah_cost`].
+//!
+//! Pipeline stage: after [`geometry`](crate::geometry), before `layout` (wide nodes) and
+//! [`traverse`](crate::traverse). Input: anything that implements [`Primitives`] (every
+//! [`Triangles`] storage, or a slice of [`Aabb`]) and a
+//! [`BuildParams`]. Output: a [`Bvh2`] (32-byte [`Node`]s, siblings adjacent, one primitive-index
+//! array) and [`BuildStats`]. Needs the `alloc` feature; single-threaded.
+//!
+//! # Builders
+//! | [`Strategy`] | paper | per node | total |
+//! |---|---|---|---|
+//! | [`Median`](Strategy::Median) | (baseline) | `select_nth` on the longest centroid axis, O(n) | O(n log n) |
+//! | [`BinnedSah`](Strategy::BinnedSah) | Wald, "On fast construction of SAH-based BVHs", 2007 | bin three axes (or the longest, [`BinAxes`]) in one pass, sweep the bins, branch-free partition; exact sweep at 8 references or fewer | O(n log n) |
+//! | [`SweepSah`](Strategy::SweepSah) | MacDonald and Booth 1990; Wald, Boulos, Shirley 2007 | sweep every boundary of three pre-sorted lists, stable partition, O(n) | O(n log n) after three radix sorts |
+//! | [`Lbvh`](Strategy::Lbvh) | Lauterbach et al. 2009; Karras 2012 | binary search for the highest differing bit | O(n) after a radix sort |
+//!
+//! The top-down builders share one loop (pbrt's `BUILD(node)`: split, group left and right,
+//! recurse, else make a leaf), written iteratively with an explicit task stack. Each task is a
+//! contiguous range of 32-byte primitive references, partitioned in O(n); nothing is allocated
+//! per node. (The binned builder partitions from one buffer into a second one, branch-free, which
+//! measured 10% faster than the best in-place partition: see `binned.rs`.) The full-sweep
+//! builder keeps the references sorted three ways (once per axis, one radix sort each up front)
+//! and partitions all three lists stably at every node, so each level costs O(n) instead of a sort
+//! per node: `O(n log n)` in all instead of `O(n log^2 n)`, at the price of three copies of the
+//! references.
+//!
+//! All working memory lives in a [`Builder`], kept between builds: fresh pages are expensive
+//! (zeroed by the kernel on first touch), and a renderer that rebuilds every frame should not pay
+//! for them every frame.
+//!
+//! # Guarantees
+//! - **Bad primitives** (non-finite vertices, boxes whose extent overflows `f32`, indices out of
+//!   range) are left out and counted in [`BuildStats::invalid`]; the root box is finite.
+//!   Zero-area triangles are kept (the ray kernels never hit them).
+//! - **Empty input** gives an empty, valid tree (no nodes); a single primitive gives one leaf.
+//! - **Termination.** Every split leaves both sides non-empty. Where the centroids of a node all
+//!   coincide (no spatial split exists), the node becomes a leaf if it may
+//!   (`N <= max_leaf_size`), else its range is cut in the middle.
+//! - **Depth.** No tree is deeper than [`BuildParams::max_depth`] (at most
+//!   [`traverse::MAX_DEPTH`](crate::traverse::MAX_DEPTH)), so the traversal stack never
+//!   overflows; see [`BuildParams::max_depth`] for how the builders ensure it.
+//! - **No panics, no recursion.** Invalid parameters give [`BuildError::InvalidParams`].
+//!
+//! ```
+//! use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, scene, traverse::Watertight};
+//! let bunny = scene::bunny();
+//! let tris = bunny.as_indexed();
+//! let (bvh, stats) = Bvh2::build(&tris, &BuildParams::fast()).unwrap();
+//! assert_eq!((stats.primitives, stats.invalid), (3674, 0));
+//! let check = bvh.validate(&tris).unwrap();
+//! assert_eq!(check.primitives, 3674);
+//! assert!(check.max_depth <= 64);
+//! println!("SAH cost {:.1}", bvh.sah_cost(1.0, 1.0));
+//! let ray = Ray::new(Vec3::new(0.0, 0.1, 1.0), -Vec3::Z);
+//! let _hit = bvh.intersect::<Watertight, _>(&tris, &ray);
+//! ```
+//!
+//! # Measured
+//! `cargo bench --bench build -- --noplot`: one core of an AMD EPYC (AVX2,
+//! `-C target-cpu=native`), a 2-vCPU VM shared with other jobs (load average about 2.5 during
+//! the run, so expect 10 to 30% noise). "Warm": a reused [`Builder`] and output tree; "cold":
+//! [`Bvh2::build`] with fresh memory. SAH cost with `C_T = C_I = 1`. Trace: the scalar reference
+//! ([`traverse::intersect_scalar`](crate::traverse::intersect_scalar), watertight), rays from
+//! outside the scene towards random points in its box.
+//!
+//! 1M-triangle thin soup (`scene::thin_soup(1 << 20, 1)`, 50,000 rays):
+//!
+//! | builder | warm Mtri/s | cold Mtri/s | SAH cost | nodes | depth | trace Mrays/s |
+//! |---|---|---|---|---|---|---|
+//! | `fastest()` (LBVH, 30-bit) | 17.3 | 7.2 | 525.0 | 1,340,619 | 25 | 0.022 |
+//! | LBVH, 63-bit | 11.0 | 5.5 | 525.0 | 1,340,619 | 25 | 0.023 |
+//! | `median()` | 4.9 | 3.6 | 518.9 | 2,031,617 | 21 | 0.025 |
+//! | `fast()` (binned, 8 bins, longest axis) | 4.8 | 3.5 | 483.7 | 1,980,401 | 25 | 0.027 |
+//! | binned, 8 bins, all axes | 3.4 | 2.7 | 473.4 | 1,976,363 | 25 | 0.028 |
+//! | `balanced()` (binned, 16 bins, all axes) | 3.1 | 2.5 | 468.9 | 1,974,893 | 25 | 0.025 |
+//! | binned, 32 bins, all axes | 3.0 | 2.4 | 466.8 | 1,974,709 | 25 | 0.027 |
+//! | `quality()` (full sweep) | 1.2 | 1.1 | 466.0 | 1,974,995 | 25 | 0.024 |
+//!
+//! The soup fills a volume: a ray crosses about `n^(1/3)` triangles' boxes, hence the SAH cost
+//! and the slow traces. The bunny (3,674 triangles, 200,000 rays), everything in cache:
+//!
+//! | builder | warm Mtri/s | SAH cost | trace Mrays/s |
+//! |---|---|---|---|
+//! | `fastest()` | 25.7 | 29.0 | 1.4 to 2.1 |
+//! | `median()` | 7.1 | 30.6 | 1.3 to 1.9 |
+//! | `fast()` | 7.7 | 26.5 | 1.6 to 2.2 |
+//! | `balanced()` | 4.9 | 25.2 | 1.3 to 2.3 |
+//! | `quality()` | 2.4 | 25.1 | 1.6 to 2.3 |
+//!
+//! (Trace speeds of the bunny varied between runs by the load; ranges over two runs.) Where the
+//! time goes, single-threaded, on the soup: the binned builders spend about a third each in
+//! binning, in the per-node work of the roughly one million nodes of 2 to 8 references (split
+//! search, bookkeeping) and in partitioning; the LBVH about 15% in the radix sort, 20% gathering
+//! the references into Morton order (random reads: latency and TLB bound) and half in the
+//! hierarchy walk. Cold builds are dominated by first-touch page faults on this machine (64 MB of
+//! new pages cost about 40 ms).
+
+mod binned;
+mod builder;
+mod lbvh;
+mod params;
+mod prims;
+pub mod radix;
+mod refit;
+mod sweep;
+mod topdown;
+mod validate;
+
+pub use builder::Builder;
+pub use params::{BinAxes, BuildParams, MAX_BINS, MAX_LEAF_SIZE, MIN_BINS, MIN_DEPTH, MortonBits, Strategy};
+pub use prims::{MAX_PRIMITIVES, Primitives};
+pub use validate::{BvhStats, ValidateError};
+
+pub use crate::traverse::Node;
+
+use crate::geometry::{Aabb, Hit, Ray, Triangles};
+use crate::traverse::{Bvh2Ref, TriangleTest, intersect_scalar, occluded_scalar};
+use alloc::vec::Vec;
+
+/// A binary BVH: [`Node`]s with the root at index 0 and each interior node's children adjacent
+/// (`left`, `left + 1`), and the primitive indices its leaves point into.
+///
+/// Built by [`Bvh2::build`]; the fields are public so that trees can be stored, loaded
+/// (both are [`bytemuck::Pod`] slices) and inspected. [`validate`](Self::validate) checks every
+/// invariant of a tree from anywhere.
+///
+/// ```
+/// use strahl::{Aabb, Vec3, build::{Bvh2, BuildParams}};
+/// // Builders work on boxes of any primitive, too.
+/// let boxes: Vec<Aabb> = (0..100)
+///     .map(|i| Aabb::new(Vec3::splat(i as f32), Vec3::splat(i as f32 + 0.5)))
+///     .collect();
+/// let (bvh, stats) = Bvh2::build(&boxes[..], &BuildParams::quality()).unwrap();
+/// assert_eq!(bvh.bounds(), Aabb::new(Vec3::ZERO, Vec3::splat(99.5)));
+/// assert_eq!(bvh.prim_indices.len(), 100);
+/// assert_eq!(stats.nodes as usize, bvh.nodes.len());
+/// assert!(bvh.validate(&boxes[..]).is_ok());
+///
+/// let (empty, _) = Bvh2::build(&[] as &[Aabb], &BuildParams::default()).unwrap();
+/// assert!(empty.is_empty() && empty.validate(&[] as &[Aabb]).is_ok());
+/// ```
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Bvh2 {
+    /// Nodes; `nodes[0]` is the root. Empty for an empty tree.
+    pub nodes: Vec<Node>,
+    /// Primitive indices (into the builder's input), in leaf order.
+    pub prim_indices: Vec<u32>,
+}
+
+/// What a build did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BuildStats {
+    /// Primitives in the tree (the valid ones).
+    pub primitives: u32,
+    /// Primitives left out: non-finite or unusable (see [`Primitives`]).
+    pub invalid: u32,
+    /// Nodes, interior and leaf.
+    pub nodes: u32,
+    /// Leaves.
+    pub leaves: u32,
+    /// Depth of the deepest leaf (root = 1; 0 for an empty tree).
+    pub max_depth: u32,
+    /// Splits not chosen by the strategy: object-median splits forced by the depth bound, and
+    /// middle splits of ranges whose centroids all coincide.
+    pub forced_splits: u32,
+}
+
+/// Why a build could not run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BuildError {
+    /// More primitives than [`MAX_PRIMITIVES`] (node indices would not fit in `u32`).
+    TooManyPrimitives {
+        /// The number of primitives given.
+        count: usize,
+    },
+    /// A [`BuildParams`] field is out of range; the text names it and the range.
+    InvalidParams(&'static str),
+}
+
+impl core::fmt::Display for BuildError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::TooManyPrimitives { count } => {
+                write!(f, "{count} primitives: more than the {MAX_PRIMITIVES} a Bvh2 can index")
+            }
+            Self::InvalidParams(what) => write!(f, "invalid build parameters: {what}"),
+        }
+    }
+}
+
+impl core::error::Error for BuildError {}
+
+impl Bvh2 {
+    /// Builds a tree over `prims` with `params`; invalid primitives are left out and counted.
+    ///
+    /// Errors only for out-of-range `params` or more than [`MAX_PRIMITIVES`] primitives. To
+    /// rebuild often, keep a [`Builder`] and use [`Builder::build_into`]: it reuses memory.
+    ///
+    /// ```
+    /// use strahl::{Vec3, build::{Bvh2, BuildError, BuildParams, Strategy}};
+    /// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::ZERO, Vec3::X, Vec3::NAN]];
+    /// for params in [BuildParams::fastest(), BuildParams::fast(), BuildParams::quality(), BuildParams::median()] {
+    ///     let (bvh, stats) = Bvh2::build(&tris[..], &params).unwrap();
+    ///     assert_eq!((stats.primitives, stats.invalid, stats.leaves), (1, 1, 1));
+    ///     assert_eq!(bvh.prim_indices, vec![0]);
+    /// }
+    /// let bad = BuildParams { bins: 1000, ..BuildParams::fast() };
+    /// assert!(matches!(Bvh2::build(&tris[..], &bad), Err(BuildError::InvalidParams(_))));
+    /// ```
+    pub fn build<P: Primitives + ?Sized>(prims: &P, params: &BuildParams) -> Result<(Bvh2, BuildStats), BuildError> {
+        Builder::new().build(prims, params)
+    }
+
+    /// A borrowed view for the [`traverse`](crate::traverse) functions.
+    #[inline]
+    pub fn view(&self) -> Bvh2Ref<'_> {
+        Bvh2Ref::new(&self.nodes, &self.prim_indices)
+    }
+
+    /// `true` if the tree has no nodes.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
+    /// The root's box ([`Aabb::EMPTY`] for an empty tree).
+    #[inline]
+    pub fn bounds(&self) -> Aabb {
+        self.view().bounds()
+    }
+
+    /// Closest hit of `ray` among `tris` through this tree, with the triangle test `T`
+    /// ([`traverse::intersect_scalar`](crate::traverse::intersect_scalar)).
+    #[inline]
+    pub fn intersect<T: TriangleTest, P: Triangles + ?Sized>(&self, tris: &P, ray: &Ray) -> Option<Hit> {
+        intersect_scalar::<T, P>(self.view(), tris, ray)
+    }
+
+    /// `true` if `ray` hits anything ([`traverse::occluded_scalar`](crate::traverse::occluded_scalar)).
+    #[inline]
+    pub fn occluded<T: TriangleTest, P: Triangles + ?Sized>(&self, tris: &P, ray: &Ray) -> bool {
+        occluded_scalar::<T, P>(self.view(), tris, ray)
+    }
+}

@@ -1,0 +1,351 @@
+//! Primitive input ([`Primitives`]) and the builders' working set: one 32-byte reference per valid
+//! primitive, its box in "negated-min" form so that growing a box is a single `max`.
+
+use super::{BuildError, Node};
+use crate::geometry::{Aabb, Triangles};
+use crate::math::{Lane, f32x4, f32x8};
+use alloc::vec::Vec;
+use glam::Vec3;
+
+/// What the builders need of a primitive: its count and each one's bounding box.
+///
+/// Implemented for everything that implements [`Triangles`] (indexed meshes, soups,
+/// `[Triangle]`) and for `[Aabb]` (any primitive type, as boxes). A primitive whose box is
+/// `None` (a triangle with a non-finite vertex or an index out of range) is **invalid**: the
+/// builders leave it out and count it in [`BuildStats::invalid`](super::BuildStats::invalid).
+/// Boxes that are empty, not finite, or whose extent or centre overflows `f32` are invalid too.
+/// A primitive's centroid, for splitting and Morton codes, is the centre of its box.
+///
+/// ```
+/// use strahl::{Aabb, Vec3, build::Primitives};
+/// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::ZERO, Vec3::X, Vec3::splat(f32::NAN)]];
+/// assert_eq!(tris[..].prim_count(), 2);
+/// assert_eq!(tris[..].prim_bounds(0), Some(Aabb::new(Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0))));
+/// assert_eq!(tris[..].prim_bounds(1), None); // NaN vertex
+/// let boxes = [Aabb::new(Vec3::ZERO, Vec3::ONE)];
+/// assert_eq!(boxes[..].prim_bounds(0), Some(boxes[0]));
+/// ```
+pub trait Primitives {
+    /// Number of primitives, valid or not.
+    fn prim_count(&self) -> usize;
+    /// Primitive `i`'s bounding box, or `None` if it is invalid or `i` is out of range.
+    fn prim_bounds(&self, i: usize) -> Option<Aabb>;
+}
+
+impl<T: Triangles + ?Sized> Primitives for T {
+    #[inline]
+    fn prim_count(&self) -> usize {
+        self.len()
+    }
+    #[inline]
+    fn prim_bounds(&self, i: usize) -> Option<Aabb> {
+        let [a, b, c] = self.triangle(i)?;
+        // NOTE: `min`/`max` ignore NaN, so finiteness is checked on the vertices themselves:
+        // `v * 0` is 0 for finite `v`, NaN for an infinity or a NaN.
+        let finite = (a * 0.0 + b * 0.0 + c * 0.0) == Vec3::ZERO;
+        finite.then(|| Aabb::new(a.min(b).min(c), a.max(b).max(c)))
+    }
+}
+
+impl Primitives for [Aabb] {
+    #[inline]
+    fn prim_count(&self) -> usize {
+        self.len()
+    }
+    #[inline]
+    fn prim_bounds(&self, i: usize) -> Option<Aabb> {
+        self.get(i).copied()
+    }
+}
+
+/// Primitive `i`'s box if the builders accept it: present, not empty, all bounds finite, and
+/// extent and `min + max` finite (so areas of single boxes and centroids never overflow).
+#[inline]
+pub(crate) fn usable_bounds<P: Primitives + ?Sized>(prims: &P, i: usize) -> Option<Aabb> {
+    let b = prims.prim_bounds(i)?;
+    let ok = b.min.cmple(b.max).all() && (b.max - b.min).is_finite() && (b.max + b.min).is_finite();
+    ok.then_some(b)
+}
+
+/// Lane 3 of a [`PrimRef`] holds the primitive index's bits XOR this, so that it reads as a normal
+/// float (in `[1, 2)` for indices below `2^23`) and never as a subnormal.
+// PERF: subnormal lanes would make some x86 cores take microcode assists in the min/max ops.
+const INDEX_XOR: u32 = 0x3F80_0000;
+
+/// A box in negated-min form `[-min.x, -min.y, -min.z, *, max.x, max.y, max.z, *]`: the union of
+/// two boxes is their lane-wise `max`, the empty box is all `-inf`.
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub(crate) struct Box8(pub f32x8);
+
+impl Box8 {
+    pub const EMPTY: Self = Self(f32x8::new([f32::NEG_INFINITY; 8]));
+
+    #[inline(always)]
+    pub fn grow(&mut self, other: Box8) {
+        self.0 = other.0.max_l(self.0);
+    }
+
+    #[inline(always)]
+    pub fn union(self, other: Box8) -> Box8 {
+        Box8(other.0.max_l(self.0))
+    }
+
+    /// `(-min, max)` as two `f32x4` (lane 3 of each is not a coordinate).
+    #[inline(always)]
+    pub fn halves(self) -> (f32x4, f32x4) {
+        let [lo, hi]: [f32x4; 2] = bytemuck::cast(self.0);
+        (lo, hi)
+    }
+
+    /// Half the surface area, 0 for an empty (or NaN) box.
+    #[cfg(test)]
+    pub fn half_area(self) -> f32 {
+        let (nlo, hi) = self.halves();
+        let d = (hi + nlo).to_array();
+        if d[0] >= 0.0 && d[1] >= 0.0 && d[2] >= 0.0 {
+            d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+        } else {
+            0.0
+        }
+    }
+
+    /// Half the surface area of a box that is not empty (branch-free; an empty box gives +inf).
+    #[inline(always)]
+    pub fn half_area_nonempty(self) -> f32 {
+        let (nlo, hi) = self.halves();
+        let d: glam::Vec3A = bytemuck::cast(hi + nlo);
+        // dx dy + dy dz + dz dx; the fourth lane is ignored.
+        d.dot(glam::Vec3Swizzles::yzx(d))
+    }
+
+    /// Flips lanes 0..3 between `-min` and `min` (the other lanes are left as they are).
+    #[inline(always)]
+    fn flip_low(v: f32x8) -> f32x8 {
+        const S: f32 = -0.0;
+        v ^ f32x8::new([S, S, S, 0.0, 0.0, 0.0, 0.0, 0.0])
+    }
+
+    /// A [`Node`] with this box (lanes: `min`, index, `max`, count).
+    #[inline(always)]
+    pub fn to_node(self, index: u32, count: u32) -> Node {
+        let mut n: Node = bytemuck::cast(Self::flip_low(self.0));
+        n.index = index;
+        n.count = count;
+        n
+    }
+
+    /// The box of a [`Node`].
+    #[inline(always)]
+    pub fn from_node(n: &Node) -> Self {
+        Self(Self::flip_low(bytemuck::cast(*n)))
+    }
+
+    #[cfg(test)]
+    pub fn from_aabb(b: &Aabb) -> Self {
+        Self(f32x8::new([
+            -b.min.x,
+            -b.min.y,
+            -b.min.z,
+            f32::NEG_INFINITY,
+            b.max.x,
+            b.max.y,
+            b.max.z,
+            0.0,
+        ]))
+    }
+
+    #[inline]
+    pub fn to_aabb(self) -> Aabb {
+        let a = self.0.to_array();
+        if a[0] == f32::NEG_INFINITY && a[4] == f32::NEG_INFINITY {
+            return Aabb::EMPTY;
+        }
+        Aabb::new(Vec3::new(-a[0], -a[1], -a[2]), Vec3::new(a[4], a[5], a[6]))
+    }
+}
+
+/// A primitive reference: its box as a [`Box8`], the primitive index in lane 3 (XOR
+/// [`INDEX_XOR`]). 32 bytes; the builders move these around.
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(transparent)]
+pub(crate) struct PrimRef(pub f32x8);
+
+impl PrimRef {
+    #[inline]
+    pub fn new(b: &Aabb, index: u32) -> Self {
+        let idx = f32::from_bits(index ^ INDEX_XOR);
+        Self(f32x8::new([
+            -b.min.x, -b.min.y, -b.min.z, idx, b.max.x, b.max.y, b.max.z, 0.0,
+        ]))
+    }
+
+    /// The primitive index.
+    #[inline(always)]
+    pub fn index(&self) -> u32 {
+        let a: [u32; 8] = bytemuck::cast(self.0);
+        a[3] ^ INDEX_XOR
+    }
+
+    #[inline(always)]
+    pub fn bounds(&self) -> Box8 {
+        Box8(self.0)
+    }
+
+    /// Twice the centroid, `max + min` (lane 3 is not a coordinate).
+    #[inline(always)]
+    pub fn c2(&self) -> f32x4 {
+        let [nlo, hi]: [f32x4; 2] = bytemuck::cast(self.0);
+        hi - nlo
+    }
+
+    /// Twice the centroid's coordinate on `axis` (0..3).
+    #[inline(always)]
+    pub fn c2_axis(&self, axis: usize) -> f32 {
+        let a = self.0.to_array();
+        a[4 + (axis & 3)] - a[axis & 3]
+    }
+}
+
+/// Bounds of doubled centroids (`min + max` of the primitive boxes), lane 3 unused.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CBounds {
+    pub lo: f32x4,
+    pub hi: f32x4,
+}
+
+impl CBounds {
+    pub const EMPTY: Self = Self {
+        lo: f32x4::new([f32::INFINITY; 4]),
+        hi: f32x4::new([f32::NEG_INFINITY; 4]),
+    };
+
+    #[inline(always)]
+    pub fn grow(&mut self, c2: f32x4) {
+        self.lo = c2.min_l(self.lo);
+        self.hi = c2.max_l(self.hi);
+    }
+
+    /// Extent per axis (lane 3 meaningless).
+    #[inline(always)]
+    pub fn extent(&self) -> [f32; 4] {
+        (self.hi - self.lo).to_array()
+    }
+
+    /// The axis of largest extent (ties: lowest), and that extent (`<= 0` when all centroids
+    /// coincide on every axis).
+    #[inline]
+    pub fn longest_axis(&self) -> (usize, f32) {
+        let e = self.extent();
+        let mut a = 0;
+        if e[1] > e[a] {
+            a = 1;
+        }
+        if e[2] > e[a] {
+            a = 2;
+        }
+        (a, e[a])
+    }
+
+    /// As an [`Aabb`] (in doubled-centroid space).
+    pub fn to_aabb(self) -> Aabb {
+        let (lo, hi) = (self.lo.to_array(), self.hi.to_array());
+        Aabb::new(Vec3::new(lo[0], lo[1], lo[2]), Vec3::new(hi[0], hi[1], hi[2]))
+    }
+}
+
+/// What [`prepare`] learns about the input besides the references themselves.
+pub(crate) struct PrepInfo {
+    /// The joint box of the valid primitives.
+    pub bounds: Box8,
+    /// Bounds of their doubled centroids.
+    pub cbounds: CBounds,
+    /// Primitives left out.
+    pub invalid: u32,
+    /// Total primitives, valid or not (primitive indices are below this).
+    pub total: usize,
+}
+
+/// Most primitives a build accepts: node indices (`2 n - 1` nodes) must fit in a `u32`.
+pub const MAX_PRIMITIVES: usize = (1 << 31) - 1;
+
+/// Fills `refs` with references to the valid primitives of `prims` (one pass; `refs` keeps its
+/// capacity from earlier builds).
+pub(crate) fn prepare<P: Primitives + ?Sized>(prims: &P, refs: &mut Vec<PrimRef>) -> Result<PrepInfo, BuildError> {
+    let total = prims.prim_count();
+    if total > MAX_PRIMITIVES {
+        return Err(BuildError::TooManyPrimitives { count: total });
+    }
+    refs.clear();
+    refs.reserve(total);
+    let mut bounds = Box8::EMPTY;
+    let mut cbounds = CBounds::EMPTY;
+    for i in 0..total {
+        if let Some(b) = usable_bounds(prims, i) {
+            let r = PrimRef::new(&b, i as u32);
+            bounds.grow(r.bounds());
+            cbounds.grow(r.c2());
+            refs.push(r);
+        }
+    }
+    Ok(PrepInfo {
+        bounds,
+        cbounds,
+        invalid: (total - refs.len()) as u32,
+        total,
+    })
+}
+
+/// `ceil(log2(n))` for `n >= 1` (0 for `n <= 1`).
+#[inline]
+pub(crate) fn ceil_log2(n: u32) -> u32 {
+    if n <= 1 { 0 } else { 32 - (n - 1).leading_zeros() }
+}
+
+/// `true` if a node at `depth` may get children holding `nl` and `nr` primitives: each child must
+/// still be finishable as a balanced subtree within `max_depth` (the invariant
+/// `depth + ceil(log2 N) <= max_depth` that every node of the builders keeps).
+#[inline]
+pub(crate) fn depth_ok(depth: u32, nl: u32, nr: u32, max_depth: u32) -> bool {
+    depth + 1 + ceil_log2(nl.max(nr)) <= max_depth
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prim_ref_round_trips() {
+        let b = Aabb::new(Vec3::new(-1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.5));
+        for idx in [0, 1, 7, 1 << 23, (1 << 31) - 2, u32::MAX] {
+            let r = PrimRef::new(&b, idx);
+            assert_eq!(r.index(), idx);
+            assert_eq!(r.bounds().to_aabb(), b);
+            assert_eq!(&r.c2().to_array()[..3], &[3.0, 7.0, 9.5]);
+            assert_eq!(r.c2_axis(2), 9.5);
+        }
+        assert_eq!(Box8::EMPTY.half_area(), 0.0);
+        assert!(Box8::EMPTY.to_aabb().is_empty());
+        assert_eq!(Box8::from_aabb(&b).half_area(), b.half_area());
+        let n = Box8::from_aabb(&b).to_node(7, 3);
+        assert_eq!(n, Node::leaf(&b, 7, 3));
+        assert_eq!(Box8::from_node(&n).to_aabb(), b);
+    }
+
+    #[test]
+    fn ceil_log2_table() {
+        let want = [
+            (0, 0),
+            (1, 0),
+            (2, 1),
+            (3, 2),
+            (4, 2),
+            (5, 3),
+            (1 << 31, 31),
+            (u32::MAX, 32),
+        ];
+        for (n, l) in want {
+            assert_eq!(ceil_log2(n), l, "{n}");
+        }
+    }
+}

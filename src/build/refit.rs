@@ -1,0 +1,125 @@
+//! [`Bvh2::refit`] (new boxes for moved primitives, same topology) and [`Bvh2::sah_cost`].
+
+use super::prims::{Primitives, usable_bounds};
+use super::{Bvh2, ValidateError};
+use crate::geometry::Aabb;
+use alloc::vec;
+use alloc::vec::Vec;
+
+impl Bvh2 {
+    /// Recomputes every node's box from the primitives' current boxes, keeping the topology
+    /// (for animated geometry whose connectivity does not change; the SAH cost of the tree may
+    /// degrade as primitives move).
+    ///
+    /// Primitives that have become invalid (say, a NaN vertex) contribute nothing to their
+    /// leaf's box; a leaf left with no valid primitive gets the empty box, which rays never hit
+    /// and [`validate`](Self::validate) reports. Errors, without changing the tree, if the
+    /// structure is malformed (indices out of range, a node reached twice).
+    ///
+    /// ```
+    /// use strahl::{Vec3, build::{Bvh2, BuildParams}};
+    /// let mut tris = vec![[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::Z, Vec3::ONE, Vec3::Y]];
+    /// let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::fast()).unwrap();
+    /// for t in &mut tris {
+    ///     for v in t.iter_mut() {
+    ///         *v += Vec3::new(10.0, 0.0, 0.0);
+    ///     }
+    /// }
+    /// bvh.refit(&tris[..]).unwrap();
+    /// assert_eq!(bvh.bounds().min.x, 10.0);
+    /// assert!(bvh.validate(&tris[..]).is_ok());
+    /// ```
+    pub fn refit<P: Primitives + ?Sized>(&mut self, prims: &P) -> Result<(), ValidateError> {
+        // Pre-order from the root (explicit stack); a parent precedes its descendants, so the
+        // reverse order visits children first.
+        let n = self.nodes.len();
+        let mut order: Vec<u32> = Vec::with_capacity(n);
+        let mut seen = vec![false; n];
+        let mut stack: Vec<u32> = Vec::new();
+        if n > 0 {
+            stack.push(0);
+            seen[0] = true;
+        }
+        while let Some(i) = stack.pop() {
+            order.push(i);
+            let node = self.nodes[i as usize];
+            if node.is_leaf() {
+                if node.prim_range().end > self.prim_indices.len() {
+                    return Err(ValidateError::SlotsOutOfRange {
+                        node: i,
+                        first: node.index,
+                        count: node.count,
+                    });
+                }
+            } else {
+                let l = node.left();
+                if l as usize >= n.saturating_sub(1) {
+                    return Err(ValidateError::ChildOutOfRange { node: i, child: l });
+                }
+                for c in [l, l + 1] {
+                    if core::mem::replace(&mut seen[c as usize], true) {
+                        return Err(ValidateError::NodeReachedTwice { node: c });
+                    }
+                    stack.push(c);
+                }
+            }
+        }
+        for &i in order.iter().rev() {
+            let node = self.nodes[i as usize];
+            let b = if node.is_leaf() {
+                self.prim_indices[node.prim_range()]
+                    .iter()
+                    .filter_map(|&p| usable_bounds(prims, p as usize))
+                    .fold(Aabb::EMPTY, |acc, b| acc.union(&b))
+            } else {
+                let l = node.left() as usize;
+                self.nodes[l].aabb().union(&self.nodes[l + 1].aabb())
+            };
+            self.nodes[i as usize].set_aabb(&b);
+        }
+        Ok(())
+    }
+
+    /// The SAH cost of the tree with traversal cost `c_t` and intersection cost `c_i`,
+    /// normalised by the root's surface area (the expected cost of a ray that hits the root, as
+    /// usual):
+    ///
+    /// ```text
+    /// cost = sum over interior nodes n of  c_t A(n) / A(root)
+    ///      + sum over leaves l of          c_i N(l) A(l) / A(root)
+    /// ```
+    ///
+    /// Sums over every node of the array (all of them are reachable in a valid tree), in `f64`.
+    /// 0 for an empty tree. If the root's area is 0 (all primitives on a point or a segment) every
+    /// node counts in full (ratio 1).
+    ///
+    /// ```
+    /// use strahl::{Vec3, build::{Bvh2, BuildParams}};
+    /// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
+    /// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// assert_eq!(bvh.sah_cost(1.0, 2.0), 2.0); // one leaf with one triangle
+    /// assert_eq!(Bvh2::default().sah_cost(1.0, 1.0), 0.0);
+    /// ```
+    pub fn sah_cost(&self, c_t: f32, c_i: f32) -> f32 {
+        let Some(root) = self.nodes.first() else {
+            return 0.0;
+        };
+        let a0 = root.aabb().half_area() as f64;
+        let norm = if a0 > 0.0 && a0.is_finite() { 1.0 / a0 } else { 0.0 };
+        let mut sum = 0.0f64;
+        for n in &self.nodes {
+            let ratio = if norm > 0.0 {
+                n.aabb().half_area() as f64 * norm
+            } else {
+                1.0
+            };
+            sum += ratio
+                * if n.is_leaf() {
+                    c_i as f64 * n.count as f64
+                } else {
+                    c_t as f64
+                };
+        }
+        sum as f32
+    }
+}

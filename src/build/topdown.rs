@@ -1,0 +1,256 @@
+//! The top-down builder for [`Strategy::Median`] and [`Strategy::BinnedSah`]: pbrt's
+//! `BUILD(node)` (find a split; make a leaf if it does not pay; else partition and build both
+//! sides) as a loop over an explicit task stack.
+//!
+//! The references live in two buffers of the same length. A task's range is valid in one of them;
+//! the binned partition moves it to the same range of the other (branch-free, see
+//! [`binned`](super::binned)), so the children's ranges are valid there; ranges of at most
+//! [`binned::SMALL`] references take an exact sweep instead of binning. The median split reorders
+//! in place. A leaf copies its primitive indices straight from whichever buffer holds it.
+
+use super::binned::{self, Binning, Bins};
+use super::builder::{Builder, Counters};
+use super::prims::{Box8, CBounds, PrepInfo, PrimRef, depth_ok};
+use super::{BinAxes, BuildParams, Bvh2, Strategy};
+use alloc::vec::Vec;
+
+/// A node still to build: its slot, the range of references it covers (valid in `alt` or `refs`),
+/// its depth (root = 1), its box and the bounds of its doubled centroids.
+struct Task {
+    node: u32,
+    begin: u32,
+    end: u32,
+    depth: u32,
+    in_alt: bool,
+    bounds: Box8,
+    cb: CBounds,
+}
+
+/// A chosen split: `mid` refs (from the range start) go left; `moved`: they are now in the other
+/// buffer.
+struct Split {
+    mid: usize,
+    moved: bool,
+    left: Box8,
+    right: Box8,
+    lcb: CBounds,
+    rcb: CBounds,
+}
+
+/// `C_T + C_I (sum / A)`: the SAH cost of a split whose `N_l A_l + N_r A_r` is `sum`, relative to
+/// a leaf's `C_I N`. A node box without a usable area (a point, a segment, an overflow) counts
+/// every primitive in full, so such a split never beats a leaf.
+#[inline]
+pub(crate) fn split_cost(p: &BuildParams, sum: f32, area: f32, count: u32) -> f32 {
+    let rel = if area > 0.0 && area.is_finite() {
+        sum / area
+    } else {
+        count as f32
+    };
+    p.traversal_cost + p.intersection_cost * rel
+}
+
+/// Builds with the median or binned strategy.
+pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2) -> Counters {
+    let Builder { refs, alt, .. } = b;
+    let n = refs.len();
+    // NOTE: resized only when the length changes; ranges are written before they are read.
+    if alt.len() != n {
+        alt.resize(n, PrimRef(Default::default()));
+    }
+    out.prim_indices.resize(n, 0);
+    out.nodes.reserve((2 * n).saturating_sub(1));
+    out.nodes.push(info.bounds.to_node(0, 0));
+    let mut bins = Bins::new();
+    let mut c = Counters::default();
+    // Left children are taken first, so the stack holds at most one right sibling per level.
+    let mut stack: Vec<Task> = Vec::with_capacity(p.max_depth as usize + 1);
+    stack.push(Task {
+        node: 0,
+        begin: 0,
+        end: n as u32,
+        depth: 1,
+        in_alt: false,
+        bounds: info.bounds,
+        cb: info.cbounds,
+    });
+    while let Some(t) = stack.pop() {
+        c.max_depth = c.max_depth.max(t.depth);
+        let count = t.end - t.begin;
+        let range = t.begin as usize..t.end as usize;
+        let (src, dst) = if t.in_alt {
+            (&mut alt[range.clone()], &mut refs[range.clone()])
+        } else {
+            (&mut refs[range.clone()], &mut alt[range.clone()])
+        };
+        if count <= p.min_leaf_size {
+            make_leaf(out, &mut c, &t, src);
+            continue;
+        }
+        let area = t.bounds.half_area_nonempty();
+        let leaf_cost = p.intersection_cost * count as f32;
+        let may_leaf = count <= p.max_leaf_size;
+
+        // Find a split, or decide on a leaf. `None`: all centroids coincide.
+        let found: Option<Option<Split>> = match p.strategy {
+            Strategy::BinnedSah if count as usize <= binned::SMALL => {
+                // Small ranges: an exact sweep (cheaper than binning at this size).
+                let axes = match p.bin_axes {
+                    BinAxes::All => 7,
+                    BinAxes::Longest => 1 << t.cb.longest_axis().0,
+                };
+                binned::find_small(src, axes).map(|(s, order)| {
+                    if may_leaf && leaf_cost <= split_cost(p, s.cost, area, count) {
+                        return None;
+                    }
+                    let k = s.left_count as usize;
+                    let (lcb, rcb) = binned::reorder_small(src, dst, &order, k);
+                    Some(Split {
+                        mid: k,
+                        moved: true,
+                        left: s.left,
+                        right: s.right,
+                        lcb,
+                        rcb,
+                    })
+                })
+            }
+            Strategy::BinnedSah => {
+                // NOTE: a node with fewer references than bins uses fewer bins (the rest would be
+                // empty): the bin sweep then costs O(N), not O(K), near the bottom of the tree.
+                let nb = p.bins.min(count);
+                let binning = Binning::new(&t.cb, nb);
+                let best = if binning.is_flat() {
+                    None
+                } else {
+                    binned::find(src, &binning, nb as usize, p.bin_axes == BinAxes::Longest, &mut bins)
+                };
+                best.map(|s| {
+                    if may_leaf && leaf_cost <= split_cost(p, s.cost, area, count) {
+                        return None;
+                    }
+                    let (mid, lcb, rcb) = binned::partition_into(src, dst, &binning, &s);
+                    debug_assert_eq!(mid, s.left_count as usize);
+                    Some(Split {
+                        mid,
+                        moved: true,
+                        left: s.left,
+                        right: s.right,
+                        lcb,
+                        rcb,
+                    })
+                })
+            }
+            _ => {
+                let (_, extent) = t.cb.longest_axis();
+                // `!(extent > 0)`: every centroid coincides (or NaN): no spatial split.
+                (extent > 0.0).then(|| {
+                    let s = median_split(src, &t.cb);
+                    let (nl, nr) = (s.mid as f32, (count as usize - s.mid) as f32);
+                    let sum = s.left.half_area_nonempty() * nl + s.right.half_area_nonempty() * nr;
+                    (!(may_leaf && leaf_cost <= split_cost(p, sum, area, count))).then_some(s)
+                })
+            }
+        };
+        let split = match found {
+            // A split that does not pay.
+            Some(None) => {
+                make_leaf(out, &mut c, &t, src);
+                continue;
+            }
+            Some(Some(s)) => s,
+            None if may_leaf => {
+                make_leaf(out, &mut c, &t, src);
+                continue;
+            }
+            None => {
+                // All centroids coincide and the node is too big for a leaf: cut the range in the
+                // middle (any order is as good as any other).
+                c.forced_splits += 1;
+                split_at(src, count as usize / 2)
+            }
+        };
+        let (nl, nr) = (split.mid as u32, count - split.mid as u32);
+        let split = if nl == 0 || nr == 0 || !depth_ok(t.depth, nl, nr, p.max_depth) {
+            // Keep the depth bound (and, defensively, non-empty sides): balanced object median,
+            // on whichever buffer now holds the range.
+            c.forced_splits += 1;
+            let holder = if split.moved { dst } else { src };
+            Split {
+                moved: split.moved,
+                ..median_split(holder, &t.cb)
+            }
+        } else {
+            split
+        };
+        let left = out.nodes.len() as u32;
+        out.nodes[t.node as usize] = t.bounds.to_node(left, 0);
+        out.nodes.push(split.left.to_node(0, 0));
+        out.nodes.push(split.right.to_node(0, 0));
+        let mid = t.begin + split.mid as u32;
+        let in_alt = t.in_alt ^ split.moved;
+        stack.push(Task {
+            node: left + 1,
+            begin: mid,
+            end: t.end,
+            depth: t.depth + 1,
+            in_alt,
+            bounds: split.right,
+            cb: split.rcb,
+        });
+        stack.push(Task {
+            node: left,
+            begin: t.begin,
+            end: mid,
+            depth: t.depth + 1,
+            in_alt,
+            bounds: split.left,
+            cb: split.lcb,
+        });
+    }
+    c
+}
+
+/// Makes `t` a leaf over `refs` (its range, in the buffer that holds it).
+fn make_leaf(out: &mut Bvh2, c: &mut Counters, t: &Task, refs: &[PrimRef]) {
+    out.nodes[t.node as usize] = t.bounds.to_node(t.begin, t.end - t.begin);
+    let slots = &mut out.prim_indices[t.begin as usize..t.end as usize];
+    for (s, r) in slots.iter_mut().zip(refs) {
+        *s = r.index();
+    }
+    c.leaves += 1;
+}
+
+/// Object median on the longest axis of `cb`: the lower half of the references (by centroid on
+/// that axis) goes left. O(n) (`select_nth_unstable`); both sides non-empty for `refs.len() >= 2`.
+fn median_split(refs: &mut [PrimRef], cb: &CBounds) -> Split {
+    let (axis, _) = cb.longest_axis();
+    let mid = refs.len() / 2;
+    refs.select_nth_unstable_by(mid, |a, b| a.c2_axis(axis).total_cmp(&b.c2_axis(axis)));
+    split_at(refs, mid)
+}
+
+/// Boxes and centroid bounds of `refs[..mid]` and `refs[mid..]` (in place).
+fn split_at(refs: &[PrimRef], mid: usize) -> Split {
+    let (l, r) = refs.split_at(mid);
+    let (left, lcb) = bounds_of(l);
+    let (right, rcb) = bounds_of(r);
+    Split {
+        mid,
+        moved: false,
+        left,
+        right,
+        lcb,
+        rcb,
+    }
+}
+
+/// The box and centroid bounds of `refs`.
+pub(crate) fn bounds_of(refs: &[PrimRef]) -> (Box8, CBounds) {
+    let (mut b, mut cb) = (Box8::EMPTY, CBounds::EMPTY);
+    for r in refs {
+        b.grow(r.bounds());
+        cb.grow(r.c2());
+    }
+    (b, cb)
+}

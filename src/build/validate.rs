@@ -1,0 +1,268 @@
+//! [`Bvh2::validate`]: every invariant of a tree, checked against its primitives, with the first
+//! violation named; and the tree's depth and leaf statistics.
+
+use super::prims::{Primitives, usable_bounds};
+use super::{Bvh2, Node};
+use alloc::vec;
+use alloc::vec::Vec;
+
+/// Shape statistics of a valid tree, from [`Bvh2::validate`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BvhStats {
+    /// Nodes (all reachable).
+    pub nodes: u32,
+    /// Leaves.
+    pub leaves: u32,
+    /// Primitives referenced (each exactly once).
+    pub primitives: u32,
+    /// Depth of the deepest leaf (root = 1; 0 for an empty tree).
+    pub max_depth: u32,
+    /// Fewest primitives in a leaf (0 for an empty tree).
+    pub min_leaf_size: u32,
+    /// Most primitives in a leaf.
+    pub max_leaf_size: u32,
+    /// Primitives per leaf, on average.
+    pub mean_leaf_size: f32,
+    /// Depth of a leaf, on average.
+    pub mean_leaf_depth: f32,
+}
+
+/// The first broken invariant [`Bvh2::validate`] found (node, slot and primitive numbers are
+/// indices into `nodes`, `prim_indices` and the primitives).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ValidateError {
+    /// An interior node's children (`child`, `child + 1`) lie beyond the node array.
+    ChildOutOfRange {
+        /// The interior node.
+        node: u32,
+        /// Its left child index.
+        child: u32,
+    },
+    /// A node is reached twice from the root (shared subtree or cycle).
+    NodeReachedTwice {
+        /// The node.
+        node: u32,
+    },
+    /// A node cannot be reached from the root.
+    NodeUnreachable {
+        /// The node.
+        node: u32,
+    },
+    /// A node's box has a NaN or infinite bound.
+    BoxNotFinite {
+        /// The node.
+        node: u32,
+    },
+    /// A node's box is empty (`min > max` on some axis): a subtree without primitives.
+    EmptyNode {
+        /// The node.
+        node: u32,
+    },
+    /// A child's box is not inside its parent's.
+    ChildNotContained {
+        /// The parent.
+        node: u32,
+        /// The child.
+        child: u32,
+    },
+    /// A leaf's slot range runs past the primitive-index array.
+    SlotsOutOfRange {
+        /// The leaf.
+        node: u32,
+        /// Its first slot.
+        first: u32,
+        /// Its primitive count.
+        count: u32,
+    },
+    /// A slot of the primitive-index array belongs to two leaves.
+    SlotSharedByLeaves {
+        /// The slot.
+        slot: u32,
+    },
+    /// A slot of the primitive-index array belongs to no leaf.
+    SlotUnused {
+        /// The slot.
+        slot: u32,
+    },
+    /// A slot holds a primitive index beyond the primitives.
+    PrimOutOfRange {
+        /// The slot.
+        slot: u32,
+        /// Its primitive index.
+        prim: u32,
+    },
+    /// The tree references a primitive the builders would leave out (see
+    /// [`Primitives`](super::Primitives)).
+    InvalidPrimReferenced {
+        /// The primitive.
+        prim: u32,
+    },
+    /// A primitive is referenced twice.
+    PrimReferencedTwice {
+        /// The primitive.
+        prim: u32,
+    },
+    /// A valid primitive is not in the tree.
+    PrimMissing {
+        /// The primitive.
+        prim: u32,
+    },
+    /// A primitive's box is not inside its leaf's box.
+    PrimNotContained {
+        /// The leaf.
+        node: u32,
+        /// The primitive.
+        prim: u32,
+    },
+}
+
+impl core::fmt::Display for ValidateError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Self::ChildOutOfRange { node, child } => {
+                write!(f, "node {node}: children {child}, {child}+1 are out of range")
+            }
+            Self::NodeReachedTwice { node } => write!(f, "node {node} is reached twice from the root"),
+            Self::NodeUnreachable { node } => write!(f, "node {node} is not reachable from the root"),
+            Self::BoxNotFinite { node } => write!(f, "node {node}: box is not finite"),
+            Self::EmptyNode { node } => write!(f, "node {node}: box is empty"),
+            Self::ChildNotContained { node, child } => {
+                write!(f, "node {node}: child {child}'s box is not inside the node's")
+            }
+            Self::SlotsOutOfRange { node, first, count } => {
+                write!(
+                    f,
+                    "leaf {node}: slots {first}..{first}+{count} run past the index array"
+                )
+            }
+            Self::SlotSharedByLeaves { slot } => write!(f, "slot {slot} belongs to two leaves"),
+            Self::SlotUnused { slot } => write!(f, "slot {slot} belongs to no leaf"),
+            Self::PrimOutOfRange { slot, prim } => write!(f, "slot {slot}: primitive {prim} is out of range"),
+            Self::InvalidPrimReferenced { prim } => write!(f, "invalid primitive {prim} is in the tree"),
+            Self::PrimReferencedTwice { prim } => write!(f, "primitive {prim} is referenced twice"),
+            Self::PrimMissing { prim } => write!(f, "valid primitive {prim} is not in the tree"),
+            Self::PrimNotContained { node, prim } => {
+                write!(f, "leaf {node}: primitive {prim}'s box is not inside the leaf's")
+            }
+        }
+    }
+}
+
+impl core::error::Error for ValidateError {}
+
+impl Bvh2 {
+    /// Checks every invariant of the tree against `prims` (the primitives it was built over):
+    /// every node reachable from the root exactly once, children and slot ranges in range, every
+    /// box finite, non-empty and containing its children's boxes and its primitives' boxes, every
+    /// slot in exactly one leaf, every valid primitive referenced exactly once and no invalid one
+    /// referenced. Returns the tree's statistics, or the first violation found. O(nodes + prims),
+    /// iterative; allocates three bitmaps.
+    ///
+    /// Boxes are compared exactly: the builders and [`refit`](Self::refit) compute them with
+    /// `min`/`max` only, so no tolerance is needed.
+    ///
+    /// ```
+    /// use strahl::{Vec3, build::{Bvh2, BuildParams, ValidateError}};
+    /// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::Z, Vec3::ONE, Vec3::Y]];
+    /// let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::quality()).unwrap();
+    /// assert_eq!(bvh.validate(&tris[..]).unwrap().primitives, 2);
+    /// bvh.prim_indices[0] = bvh.prim_indices[1];
+    /// assert!(matches!(bvh.validate(&tris[..]), Err(ValidateError::PrimReferencedTwice { .. })));
+    /// ```
+    pub fn validate<P: Primitives + ?Sized>(&self, prims: &P) -> Result<BvhStats, ValidateError> {
+        let nodes = &self.nodes;
+        let total = prims.prim_count();
+        let mut node_seen = vec![false; nodes.len()];
+        let mut slot_seen = vec![false; self.prim_indices.len()];
+        let mut prim_seen = vec![false; total];
+        let mut stats = BvhStats::default();
+        let mut depth_sum = 0u64;
+        let mut stack: Vec<(u32, u32)> = Vec::new();
+        if !nodes.is_empty() {
+            stack.push((0, 1));
+            node_seen[0] = true;
+        }
+        while let Some((i, depth)) = stack.pop() {
+            let node: &Node = &nodes[i as usize];
+            stats.nodes += 1;
+            let b = node.aabb();
+            if !(b.min.is_finite() && b.max.is_finite()) {
+                return Err(ValidateError::BoxNotFinite { node: i });
+            }
+            if b.is_empty() {
+                return Err(ValidateError::EmptyNode { node: i });
+            }
+            if node.is_leaf() {
+                stats.leaves += 1;
+                stats.max_depth = stats.max_depth.max(depth);
+                depth_sum += depth as u64;
+                stats.min_leaf_size = if stats.leaves == 1 {
+                    node.count
+                } else {
+                    stats.min_leaf_size.min(node.count)
+                };
+                stats.max_leaf_size = stats.max_leaf_size.max(node.count);
+                let range = node.prim_range();
+                if range.end > self.prim_indices.len() {
+                    return Err(ValidateError::SlotsOutOfRange {
+                        node: i,
+                        first: node.index,
+                        count: node.count,
+                    });
+                }
+                for slot in range {
+                    if core::mem::replace(&mut slot_seen[slot], true) {
+                        return Err(ValidateError::SlotSharedByLeaves { slot: slot as u32 });
+                    }
+                    let prim = self.prim_indices[slot];
+                    let Some(seen) = prim_seen.get_mut(prim as usize) else {
+                        return Err(ValidateError::PrimOutOfRange {
+                            slot: slot as u32,
+                            prim,
+                        });
+                    };
+                    if core::mem::replace(seen, true) {
+                        return Err(ValidateError::PrimReferencedTwice { prim });
+                    }
+                    let Some(pb) = usable_bounds(prims, prim as usize) else {
+                        return Err(ValidateError::InvalidPrimReferenced { prim });
+                    };
+                    if !b.contains(&pb) {
+                        return Err(ValidateError::PrimNotContained { node: i, prim });
+                    }
+                    stats.primitives += 1;
+                }
+            } else {
+                let l = node.left();
+                if l as usize >= nodes.len().saturating_sub(1) {
+                    return Err(ValidateError::ChildOutOfRange { node: i, child: l });
+                }
+                for c in [l, l + 1] {
+                    if !b.contains(&nodes[c as usize].aabb()) {
+                        return Err(ValidateError::ChildNotContained { node: i, child: c });
+                    }
+                    if core::mem::replace(&mut node_seen[c as usize], true) {
+                        return Err(ValidateError::NodeReachedTwice { node: c });
+                    }
+                    stack.push((c, depth + 1));
+                }
+            }
+        }
+        if let Some(n) = node_seen.iter().position(|s| !s) {
+            return Err(ValidateError::NodeUnreachable { node: n as u32 });
+        }
+        if let Some(s) = slot_seen.iter().position(|s| !s) {
+            return Err(ValidateError::SlotUnused { slot: s as u32 });
+        }
+        for (p, seen) in prim_seen.iter().enumerate() {
+            if !seen && usable_bounds(prims, p).is_some() {
+                return Err(ValidateError::PrimMissing { prim: p as u32 });
+            }
+        }
+        if stats.leaves > 0 {
+            stats.mean_leaf_size = stats.primitives as f32 / stats.leaves as f32;
+            stats.mean_leaf_depth = (depth_sum as f64 / stats.leaves as f64) as f32;
+        }
+        Ok(stats)
+    }
+}

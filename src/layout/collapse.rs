@@ -1,0 +1,354 @@
+//! BVH2 -> BVH4/BVH8: the greedy largest-surface-area collapse.
+
+use super::{BvhWide, LEAF_BIT, MAX_LEAF_PACKS, MAX_WIDE_DEPTH, WideNode};
+use crate::build::Bvh2;
+use crate::geometry::{Aabb, Triangle, Triangles};
+use crate::intersect::TriangleLanes;
+use crate::math::Lane;
+use alloc::vec;
+use alloc::vec::Vec;
+
+/// Why a wide BVH could not be made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CollapseError {
+    /// A node or primitive index of the binary tree is out of range (run
+    /// [`Bvh2::validate`](crate::build::Bvh2::validate) to see what broke).
+    Malformed,
+    /// The wide tree would be deeper than [`MAX_WIDE_DEPTH`].
+    TooDeep,
+    /// More triangle packs than leaf codes can address (2^27).
+    TooLarge,
+}
+
+impl core::fmt::Display for CollapseError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::Malformed => "the binary BVH refers to a node or primitive that does not exist",
+            Self::TooDeep => "the wide BVH would be deeper than MAX_WIDE_DEPTH",
+            Self::TooLarge => "too many triangle packs for the leaf encoding",
+        })
+    }
+}
+
+impl core::error::Error for CollapseError {}
+
+struct Builder<'a, L, const N: usize, P: ?Sized> {
+    bvh: &'a Bvh2,
+    tris: &'a P,
+    /// Primitives below each binary node.
+    counts: Vec<u32>,
+    nodes: Vec<WideNode<L, N>>,
+    packs: Vec<TriangleLanes<L, N>>,
+    depth: u32,
+}
+
+fn half_area(b: &Aabb) -> f32 {
+    if b.is_empty() { -1.0 } else { b.half_area() }
+}
+
+impl<L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'_, L, N, P> {
+    /// Packs the primitives `prims` into leaf codes; more than `MAX_LEAF_PACKS * N` go below a
+    /// node of their own. Returns the child code and its box.
+    fn leaf(&mut self, prims: &[u32], depth: u32) -> Result<(u32, Aabb), CollapseError> {
+        let mut bounds = Aabb::EMPTY;
+        let tris: Vec<Triangle> = prims
+            .iter()
+            .map(|&p| self.tris.triangle(p as usize).ok_or(CollapseError::Malformed))
+            .collect::<Result<_, _>>()?;
+        for t in &tris {
+            if t.iter().all(|v| v.is_finite()) {
+                for v in t {
+                    bounds.grow(*v);
+                }
+            }
+        }
+        if prims.len() > MAX_LEAF_PACKS * N {
+            // Split the run into up to N children of a node of its own.
+            let at = self.new_node(depth)?;
+            let per = prims.len().div_ceil(N);
+            let mut node = WideNode::<L, N>::empty();
+            let mut lo = [[f32::INFINITY; 8]; 3];
+            let mut hi = [[f32::NEG_INFINITY; 8]; 3];
+            for (i, chunk) in prims.chunks(per).enumerate() {
+                let (code, b) = self.leaf(chunk, depth + 1)?;
+                node.child[i] = code;
+                for a in 0..3 {
+                    lo[a][i] = b.min[a];
+                    hi[a][i] = b.max[a];
+                }
+            }
+            node.bounds.min = lo.map(|v| L::load(&v));
+            node.bounds.max = hi.map(|v| L::load(&v));
+            self.nodes[at] = node;
+            return Ok((at as u32, bounds));
+        }
+        let first = self.packs.len();
+        if first + prims.len().div_ceil(N) >= 1 << 27 {
+            return Err(CollapseError::TooLarge);
+        }
+        for (t, p) in tris.chunks(N).zip(prims.chunks(N)) {
+            self.packs.push(TriangleLanes::pack(t, p));
+        }
+        let count = self.packs.len() - first;
+        Ok((LEAF_BIT | (first as u32) << 4 | (count as u32 - 1), bounds))
+    }
+
+    fn new_node(&mut self, depth: u32) -> Result<usize, CollapseError> {
+        if depth > MAX_WIDE_DEPTH {
+            return Err(CollapseError::TooDeep);
+        }
+        self.depth = self.depth.max(depth);
+        self.nodes.push(WideNode::empty());
+        Ok(self.nodes.len() - 1)
+    }
+
+    fn bnode(&self, i: u32) -> Result<&crate::traverse::Node, CollapseError> {
+        self.bvh.nodes.get(i as usize).ok_or(CollapseError::Malformed)
+    }
+
+    /// The primitives below binary node `b`, in leaf order.
+    fn subtree_prims(&self, b: u32) -> Result<Vec<u32>, CollapseError> {
+        let mut out = Vec::new();
+        let mut todo = vec![b];
+        let mut budget = self.bvh.nodes.len();
+        while let Some(i) = todo.pop() {
+            budget = budget.checked_sub(1).ok_or(CollapseError::Malformed)?;
+            let n = self.bnode(i)?;
+            if n.is_leaf() {
+                out.extend_from_slice(
+                    self.bvh
+                        .prim_indices
+                        .get(n.prim_range())
+                        .ok_or(CollapseError::Malformed)?,
+                );
+            } else {
+                todo.push(n.right());
+                todo.push(n.left());
+            }
+        }
+        Ok(out)
+    }
+
+    fn count(&self, b: u32) -> usize {
+        self.counts.get(b as usize).map_or(usize::MAX, |&c| c as usize)
+    }
+
+    /// Fills wide node `at` from binary interior node `b`, then its interior children (explicit
+    /// stack: no recursion on the tree depth).
+    fn run(&mut self, root: u32) -> Result<(), CollapseError> {
+        let at = self.new_node(1)?;
+        let mut todo = vec![(root, at, 1u32)];
+        while let Some((b, at, depth)) = todo.pop() {
+            // Open the child with the largest surface area until there are N.
+            let node = *self.bnode(b)?;
+            let mut kids: Vec<u32> = if node.is_leaf() {
+                vec![b]
+            } else {
+                vec![node.left(), node.right()]
+            };
+            while kids.len() < N {
+                let mut best = None;
+                for (i, &k) in kids.iter().enumerate() {
+                    let n = self.bnode(k)?;
+                    if !n.is_leaf() && self.count(k) > N {
+                        let a = half_area(&n.aabb());
+                        if best.is_none_or(|(_, ba)| a > ba) {
+                            best = Some((i, a));
+                        }
+                    }
+                }
+                let Some((i, _)) = best else { break };
+                let n = *self.bnode(kids[i])?;
+                kids[i] = n.left();
+                kids.insert(i + 1, n.right());
+            }
+            let mut wide = WideNode::<L, N>::empty();
+            let mut lo = [[f32::INFINITY; 8]; 3];
+            let mut hi = [[f32::NEG_INFINITY; 8]; 3];
+            for (i, &k) in kids.iter().enumerate() {
+                let n = *self.bnode(k)?;
+                let (code, bounds) = if n.is_leaf() {
+                    let prims = self
+                        .bvh
+                        .prim_indices
+                        .get(n.prim_range())
+                        .ok_or(CollapseError::Malformed)?;
+                    let (code, _) = self.leaf(prims, depth + 1)?;
+                    (code, n.aabb())
+                } else if self.count(k) <= N {
+                    // A small subtree becomes one full pack: one x8 test instead of more nodes.
+                    let prims = self.subtree_prims(k)?;
+                    let (code, _) = self.leaf(&prims, depth + 1)?;
+                    (code, n.aabb())
+                } else {
+                    let child = self.new_node(depth + 1)?;
+                    todo.push((k, child, depth + 1));
+                    (child as u32, n.aabb())
+                };
+                wide.child[i] = code;
+                for a in 0..3 {
+                    lo[a][i] = bounds.min[a];
+                    hi[a][i] = bounds.max[a];
+                }
+            }
+            wide.bounds.min = lo.map(|v| L::load(&v));
+            wide.bounds.max = hi.map(|v| L::load(&v));
+            self.nodes[at] = wide;
+        }
+        Ok(())
+    }
+}
+
+/// Primitives below every binary node (iterative post-order; malformed trees are errors).
+fn subtree_counts(bvh: &Bvh2) -> Result<Vec<u32>, CollapseError> {
+    let n = bvh.nodes.len();
+    let mut counts = vec![0u32; n];
+    if n == 0 {
+        return Ok(counts);
+    }
+    // (node, children done)
+    let mut todo = vec![(0u32, false)];
+    let mut budget = 2 * n + 1;
+    while let Some((i, done)) = todo.pop() {
+        budget = budget.checked_sub(1).ok_or(CollapseError::Malformed)?;
+        let node = bvh.nodes.get(i as usize).ok_or(CollapseError::Malformed)?;
+        if node.is_leaf() {
+            counts[i as usize] = node.count;
+        } else if done {
+            let c = |j: u32| counts.get(j as usize).copied().ok_or(CollapseError::Malformed);
+            counts[i as usize] = c(node.left())?.saturating_add(c(node.right())?);
+        } else {
+            todo.push((i, true));
+            todo.push((node.right(), false));
+            todo.push((node.left(), false));
+        }
+    }
+    Ok(counts)
+}
+
+impl<L: Lane, const N: usize> BvhWide<L, N> {
+    /// Collapses `bvh` (built over `tris`) into an `N`-wide BVH with packed leaves.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// let mesh = strahl::scene::icosphere(2);
+    /// let tris = mesh.to_soup();
+    /// let (bvh2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let bvh8 = Bvh8::from_bvh2(&bvh2, &tris[..]).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -5.0), Vec3::Z);
+    /// let hit = bvh8.intersect::<Watertight>(&ray).unwrap();
+    /// assert_eq!(Some(hit), bvh2.intersect::<Watertight, _>(&tris[..], &ray));
+    /// assert!(bvh8.occluded::<Watertight>(&ray));
+    /// ```
+    pub fn from_bvh2<P: Triangles + ?Sized>(bvh: &Bvh2, tris: &P) -> Result<Self, CollapseError> {
+        let () = Self::LANES_MATCH;
+        let counts = subtree_counts(bvh)?;
+        let mut b = Builder::<L, N, P> {
+            bvh,
+            tris,
+            counts,
+            nodes: Vec::new(),
+            packs: Vec::new(),
+            depth: 0,
+        };
+        if !bvh.nodes.is_empty() {
+            b.run(0)?;
+        }
+        Ok(Self {
+            nodes: b.nodes,
+            packs: b.packs,
+            depth: b.depth,
+        })
+    }
+
+    const LANES_MATCH: () = assert!(L::N == N && N <= 8);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::layout::{Bvh4, Bvh8, EMPTY_CHILD, leaf_packs};
+
+    #[test]
+    fn every_triangle_lands_in_exactly_one_pack() {
+        let mesh = crate::scene::icosphere(3);
+        let tris = mesh.to_soup();
+        for params in [
+            crate::build::BuildParams::default(),
+            crate::build::BuildParams::fastest(),
+        ] {
+            let (b2, _) = Bvh2::build(&tris[..], &params).unwrap();
+            let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+            let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+            let mut seen = vec![0u32; tris.len()];
+            for p in b8.packs() {
+                for i in 0..8 {
+                    if p.prim[i] != crate::geometry::INVALID {
+                        seen[p.prim[i] as usize] += 1;
+                    }
+                }
+            }
+            assert!(seen.iter().all(|&c| c == 1));
+            let seen4: usize = b4
+                .packs()
+                .iter()
+                .map(|p| p.prim.iter().filter(|&&x| x != u32::MAX).count())
+                .sum();
+            assert_eq!(seen4, tris.len());
+            // Every leaf code addresses packs in range; every child box contains its packs.
+            for n in b8.nodes() {
+                for (i, &c) in n.child.iter().enumerate() {
+                    if c != EMPTY_CHILD && c & LEAF_BIT != 0 {
+                        let (first, count) = leaf_packs(c);
+                        assert!(first + count <= b8.packs().len());
+                        let b = n.bounds.get(i);
+                        for p in &b8.packs()[first..first + count] {
+                            for l in 0..8 {
+                                if p.valid >> l & 1 == 1 {
+                                    for v in p.get(l) {
+                                        assert!(b.contains_point(v));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            assert!(b8.nodes().len() < b2.nodes.len() / 4);
+        }
+    }
+
+    #[test]
+    fn huge_leaves_get_a_node_of_their_own() {
+        // 300 copies of one triangle: all centroids coincide; a builder allowed huge leaves
+        // makes one leaf, which the collapse must split into packs under extra nodes.
+        let t = [glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y];
+        let tris = vec![t; 300];
+        let b2 = Bvh2 {
+            nodes: vec![crate::traverse::Node::leaf(&Aabb::from_points(&t), 0, 300)],
+            prim_indices: (0..300).collect(),
+        };
+        let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+        let total: usize = b8.packs().iter().map(|p| p.valid.count_ones() as usize).sum();
+        assert_eq!(total, 300);
+        assert!(b8.depth() >= 2);
+    }
+
+    #[test]
+    fn malformed_trees_are_errors() {
+        let t = [glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Y];
+        let tris = [t; 2];
+        let bad = Bvh2 {
+            nodes: vec![crate::traverse::Node::interior(&Aabb::from_points(&t), 7)],
+            prim_indices: vec![],
+        };
+        assert_eq!(Bvh8::from_bvh2(&bad, &tris[..]).unwrap_err(), CollapseError::Malformed);
+        let bad = Bvh2 {
+            nodes: vec![crate::traverse::Node::leaf(&Aabb::from_points(&t), 0, 5)],
+            prim_indices: vec![0, 1],
+        };
+        assert_eq!(Bvh8::from_bvh2(&bad, &tris[..]).unwrap_err(), CollapseError::Malformed);
+        let empty = Bvh8::from_bvh2(&Bvh2::default(), &tris[..]).unwrap();
+        assert!(empty.is_empty());
+    }
+}

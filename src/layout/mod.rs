@@ -1,0 +1,157 @@
+//! Wide BVHs: a [`Bvh2`] collapsed into 4- or 8-wide nodes whose child boxes sit in SoA lanes for
+//! the x4/x8 slab test, with leaves of triangles pre-packed in SoA form for the x4/x8 triangle
+//! kernels. Traversal is in [`traverse::wide`](crate::traverse::wide).
+//!
+//! # Collapse
+//! Top-down and cost-aware, as Embree and Wald et al. ("Getting rid of packets", 2008) do: a wide
+//! node starts from a binary node's two children and repeatedly opens the interior child with the
+//! largest surface area (the one a ray is most likely to enter) until it has `N` children. Wide
+//! leaves are the binary leaves, their triangles packed `N` at a time (a leaf of more than `N`
+//! triangles becomes several packs, up to [`MAX_LEAF_PACKS`]; larger ones get their own node).
+//!
+//! # Layout
+//! ```text
+//!  Node8 (256 bytes, 64-byte aligned)      Node4 (128 bytes)
+//!   min x | min y | min z   3 x f32x8       3 x f32x4
+//!   max x | max y | max z   3 x f32x8       3 x f32x4
+//!   child[8]: u32           interior: node index
+//!                           leaf:     LEAF_BIT | first pack << 4 | (packs - 1)
+//!                           unused:   EMPTY_CHILD (its box is empty, so never hit)
+//!   pad[8]: u32
+//! ```
+
+#[cfg(feature = "alloc")]
+mod collapse;
+
+use crate::intersect::{AabbLanes, TriangleLanes};
+use crate::math::{Lane, f32x4, f32x8};
+#[cfg(feature = "alloc")]
+use alloc::vec::Vec;
+
+#[cfg(feature = "alloc")]
+pub use collapse::CollapseError;
+
+/// Marks a leaf child code.
+pub const LEAF_BIT: u32 = 1 << 31;
+/// An unused child slot.
+pub const EMPTY_CHILD: u32 = u32::MAX;
+/// Most packs (of `N` triangles) one leaf child refers to.
+pub const MAX_LEAF_PACKS: usize = 16;
+
+/// Decodes a leaf child code into `(first pack, number of packs)`.
+#[inline(always)]
+pub const fn leaf_packs(code: u32) -> (usize, usize) {
+    (((code & !LEAF_BIT) >> 4) as usize, (code & 15) as usize + 1)
+}
+
+/// One node of an `N`-wide BVH: `N` child boxes in SoA lanes and `N` child codes.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct WideNode<L, const N: usize> {
+    /// Child boxes, lane `i` for child `i` (empty boxes for unused slots).
+    pub bounds: AabbLanes<L>,
+    /// Child codes: a node index, a leaf ([`LEAF_BIT`], see [`leaf_packs`]) or [`EMPTY_CHILD`].
+    pub child: [u32; N],
+    _pad: [u32; N],
+}
+
+/// A 4-wide node (128 bytes).
+pub type Node4 = WideNode<f32x4, 4>;
+/// An 8-wide node (256 bytes).
+pub type Node8 = WideNode<f32x8, 8>;
+
+const _: () = assert!(core::mem::size_of::<Node4>() == 128);
+const _: () = assert!(core::mem::size_of::<Node8>() == 256);
+const _: () = assert!(core::mem::size_of::<TriangleLanes<f32x8, 8>>() == 8 * 4 * 9 + 8 * 4 + 32);
+
+impl<L: Lane, const N: usize> WideNode<L, N> {
+    /// A node with every slot empty.
+    pub fn empty() -> Self {
+        Self {
+            bounds: AabbLanes::empty(),
+            child: [EMPTY_CHILD; N],
+            _pad: [0; N],
+        }
+    }
+}
+
+/// A borrowed `N`-wide BVH: nodes (the root is `nodes[0]`) and the triangle packs the leaves refer
+/// to. Traversal ([`traverse::wide`](crate::traverse::wide)) works on this view, without `alloc`.
+///
+/// Nothing is checked on construction: traversal never panics and always terminates on any
+/// slices (codes out of range are skipped, a tree deeper than [`MAX_WIDE_DEPTH`] loses the nodes
+/// that do not fit on the stack). Trees from [`BvhWide::from_bvh2`] are always within bounds.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhWideRef<'a, L, const N: usize> {
+    /// Nodes; the root is `nodes[0]`.
+    pub nodes: &'a [WideNode<L, N>],
+    /// Triangle packs referenced by leaf codes.
+    pub packs: &'a [TriangleLanes<L, N>],
+}
+
+/// A borrowed [`Bvh4`].
+pub type Bvh4Ref<'a> = BvhWideRef<'a, f32x4, 4>;
+/// A borrowed [`Bvh8`].
+pub type Bvh8Ref<'a> = BvhWideRef<'a, f32x8, 8>;
+
+/// An `N`-wide BVH over triangles, owning its nodes and packs. Build it with
+/// [`BvhWide::from_bvh2`]; trace it with [`BvhWide::intersect`] and [`BvhWide::occluded`].
+///
+/// The fields are private so that every value keeps the invariants traversal is exact under:
+/// every code in range and the depth within [`MAX_WIDE_DEPTH`].
+#[cfg(feature = "alloc")]
+#[derive(Clone, Debug)]
+pub struct BvhWide<L, const N: usize> {
+    pub(crate) nodes: Vec<WideNode<L, N>>,
+    pub(crate) packs: Vec<TriangleLanes<L, N>>,
+    pub(crate) depth: u32,
+}
+
+/// A 4-wide BVH (SSE / NEON lanes).
+#[cfg(feature = "alloc")]
+pub type Bvh4 = BvhWide<f32x4, 4>;
+/// An 8-wide BVH (AVX lanes, or two SSE halves).
+#[cfg(feature = "alloc")]
+pub type Bvh8 = BvhWide<f32x8, 8>;
+
+/// The deepest wide tree traversal handles exactly (root = 1); [`BvhWide::from_bvh2`] refuses
+/// deeper ones. The traversal stack holds `MAX_WIDE_DEPTH * (N - 1) + 1` entries.
+pub const MAX_WIDE_DEPTH: u32 = 72;
+
+#[cfg(feature = "alloc")]
+impl<L: Lane, const N: usize> BvhWide<L, N> {
+    /// The borrowed view traversal works on.
+    #[inline]
+    pub fn view(&self) -> BvhWideRef<'_, L, N> {
+        BvhWideRef {
+            nodes: &self.nodes,
+            packs: &self.packs,
+        }
+    }
+
+    /// The nodes; `nodes()[0]` is the root (empty slice for an empty tree).
+    pub fn nodes(&self) -> &[WideNode<L, N>] {
+        &self.nodes
+    }
+
+    /// The triangle packs the leaves refer to.
+    pub fn packs(&self) -> &[TriangleLanes<L, N>] {
+        &self.packs
+    }
+
+    /// Depth of the tree (root = 1, 0 when empty).
+    pub fn depth(&self) -> u32 {
+        self.depth
+    }
+
+    /// `true` for a tree without nodes (no valid triangles).
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
+    /// Bytes of nodes and packs.
+    pub fn memory_bytes(&self) -> usize {
+        self.nodes.len() * core::mem::size_of::<WideNode<L, N>>()
+            + self.packs.len() * core::mem::size_of::<TriangleLanes<L, N>>()
+    }
+}

@@ -1,0 +1,156 @@
+//! Single-ray BVH traversal: closest hit ([`intersect_scalar`]) and any hit ([`occluded_scalar`])
+//! through a binary BVH, plus brute force over all primitives ([`intersect_brute_force`],
+//! [`occluded_brute_force`]).
+//!
+//! Pipeline stage: after [`build`](crate::build) (or any other producer of [`Node`] arrays).
+//! Input: a [`Bvh2Ref`] (nodes and primitive indices, borrowed), the triangles as any
+//! [`Triangles`](crate::geometry::Triangles), and a [`Ray`](crate::Ray). Output: the closest
+//! [`Hit`], or whether anything is hit. Core-only: no allocation; the stack lives on
+//! the call stack.
+//!
+//! These scalar loops are the **reference** that later wide (BVH4/BVH8) and packet traversals are
+//! checked against, so they favour being obviously right: the crate's robust slab test
+//! ([`intersect_aabb_scalar`](crate::intersect::intersect_aabb_scalar), Ize 2013) on both
+//! children, near child first, the far one pushed with its entry distance and skipped on pop if a
+//! closer hit has been found since (the same comparison the slab test would make with the new
+//! `tmax`, so the result equals brute force exactly).
+//!
+//! # The triangle test is chosen at compile time
+//! [`TriangleTest`] is implemented by the marker types [`Moller`] and [`Watertight`]; traversal is
+//! generic over it, so the test is inlined into the leaf loop:
+//! `intersect_scalar::<Watertight, _>(bvh, &tris, &ray)`.
+//!
+//! # Depth and the stack
+//! The stack holds [`STACK_SIZE`] entries, enough for any tree of depth `STACK_SIZE + 1` or less;
+//! every builder in [`build`](crate::build) caps the depth at
+//! [`BuildParams::max_depth`](crate::build::BuildParams::max_depth) `<=` [`MAX_DEPTH`]
+//! `= STACK_SIZE`. A deeper tree (made elsewhere) is still answered exactly: when a push would
+//! overflow the stack, the traversal finishes with a linear scan over all of the tree's primitive
+//! indices (slow, but never wrong for a valid tree). A malformed tree (indices out of range, a
+//! cycle) never panics and never loops forever: out-of-range entries are skipped and after as many
+//! node visits as there are nodes, the same linear scan ends the search.
+//!
+//! ```
+//! use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, geometry::TriangleSoup, scene};
+//! use strahl::traverse::{Watertight, intersect_brute_force, intersect_scalar, occluded_scalar};
+//! let mesh = scene::icosphere(2);
+//! let tris = mesh.as_indexed();
+//! let (bvh, _) = Bvh2::build(&tris, &BuildParams::default()).unwrap();
+//! let ray = Ray::new(Vec3::new(0.1, 0.2, -5.0), Vec3::Z);
+//! let hit = intersect_scalar::<Watertight, _>(bvh.view(), &tris, &ray).unwrap();
+//! assert_eq!(Some(hit), intersect_brute_force::<Watertight, _>(&tris, &ray));
+//! assert!((hit.t - 4.0).abs() < 0.05); // the sphere's near side, close to z = -1
+//! assert!(occluded_scalar::<Watertight, _>(bvh.view(), &tris, &ray));
+//! ```
+
+mod brute;
+mod bvh2;
+mod node;
+pub mod packet;
+mod stack;
+pub mod wide;
+
+pub use brute::{intersect_brute_force, occluded_brute_force};
+pub use bvh2::{intersect_scalar, occluded_scalar};
+pub use node::{Bvh2Ref, Node};
+
+use crate::geometry::{Hit, Triangle};
+use crate::intersect::{HitLanes, PreparedPacket, PreparedRay, TriangleLanes, moller, watertight};
+use crate::math::Lane;
+
+/// Entries of the traversal stack (on the call stack: `STACK_SIZE * 8` bytes).
+pub const STACK_SIZE: usize = 64;
+
+/// The deepest tree (counting the root as depth 1) whose traversal never overflows the stack, and
+/// the largest [`BuildParams::max_depth`](crate::build::BuildParams::max_depth) a builder accepts.
+///
+/// Near-first traversal pushes at most one node per level below the root, so a tree of depth
+/// `STACK_SIZE + 1` would fit; the builders keep one level in reserve.
+pub const MAX_DEPTH: u32 = STACK_SIZE as u32;
+
+/// A ray/triangle test, chosen at compile time by a marker type ([`Moller`], [`Watertight`]).
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::PreparedRay, traverse::{Moller, TriangleTest, Watertight}};
+/// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+/// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+/// assert_eq!(Moller::intersect(&ray, &tri, 3).unwrap().t, 2.0);
+/// assert_eq!(Watertight::intersect(&ray, &tri, 3).unwrap().prim, 3);
+/// assert_eq!(Watertight::NAME, "watertight");
+/// ```
+pub trait TriangleTest {
+    /// A short name for reports and bench labels.
+    const NAME: &'static str;
+    /// The hit of `ray` with `tri` (reported with `prim`), if any, within `[tmin, tmax)`.
+    fn intersect(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<Hit>;
+    /// The closest hit among `N` SoA triangles (ties: lowest lane), for wide-BVH leaves.
+    fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit>;
+    /// The mask of lanes of `tris` hit within `[tmin, tmax)`, for any-hit queries.
+    fn hit_mask_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> u32;
+    /// `N` rays against one triangle: lanes hit closer than their `tmax` get `hits` and `tmax`
+    /// updated; returns the mask of lanes hit (for packet traversal).
+    fn intersect_packet<L: Lane, const N: usize>(
+        rays: &mut PreparedPacket<L, N>,
+        tri: &Triangle,
+        prim: u32,
+        hits: &mut HitLanes<L, N>,
+    ) -> u32;
+}
+
+/// Möller-Trumbore ([`moller::intersect_scalar`]): fast, not watertight.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Moller;
+
+/// Woop, Benthin and Wald's watertight test ([`watertight::intersect_scalar`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Watertight;
+
+impl TriangleTest for Moller {
+    const NAME: &'static str = "moller";
+    #[inline(always)]
+    fn intersect(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<Hit> {
+        moller::intersect_scalar(ray, tri, prim)
+    }
+    #[inline(always)]
+    fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit> {
+        moller::intersect_lanes(ray, tris)
+    }
+    #[inline(always)]
+    fn hit_mask_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> u32 {
+        moller::hit_mask(ray, tris)
+    }
+    #[inline(always)]
+    fn intersect_packet<L: Lane, const N: usize>(
+        rays: &mut PreparedPacket<L, N>,
+        tri: &Triangle,
+        prim: u32,
+        hits: &mut HitLanes<L, N>,
+    ) -> u32 {
+        moller::intersect_packet(rays, tri, prim, hits)
+    }
+}
+
+impl TriangleTest for Watertight {
+    const NAME: &'static str = "watertight";
+    #[inline(always)]
+    fn intersect(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<Hit> {
+        watertight::intersect_scalar(ray, tri, prim)
+    }
+    #[inline(always)]
+    fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit> {
+        watertight::intersect_lanes(ray, tris)
+    }
+    #[inline(always)]
+    fn hit_mask_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> u32 {
+        watertight::hit_mask(ray, tris)
+    }
+    #[inline(always)]
+    fn intersect_packet<L: Lane, const N: usize>(
+        rays: &mut PreparedPacket<L, N>,
+        tri: &Triangle,
+        prim: u32,
+        hits: &mut HitLanes<L, N>,
+    ) -> u32 {
+        watertight::intersect_packet(rays, tri, prim, hits)
+    }
+}

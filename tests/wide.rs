@@ -1,0 +1,265 @@
+//! BVH2, BVH4, BVH8 and brute force give the same closest hits (same `t`; the same primitive
+//! unless two triangles tie at that `t`) and the same any-hit answers, for every builder, on
+//! random, clustered and adversarial scenes, with NaN rays, zero direction components and -0.0.
+
+use strahl::build::{BuildParams, Bvh2};
+use strahl::geometry::{Hit, Triangle};
+use strahl::layout::{Bvh4, Bvh8};
+use strahl::scene::{self, Rng};
+use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_brute_force, occluded_brute_force};
+use strahl::{Ray, Vec3};
+
+fn rays(tris: &[Triangle], n: usize, seed: u64) -> Vec<Ray> {
+    let mut rng = Rng::new(seed);
+    let b = tris
+        .iter()
+        .flatten()
+        .filter(|v| v.is_finite())
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(*v), hi.max(*v))
+        });
+    let (lo, hi) = if b.0.x <= b.1.x { b } else { (Vec3::ZERO, Vec3::ONE) };
+    let size = (hi - lo).max_element().max(1e-6);
+    let mut out = Vec::with_capacity(n + 16);
+    for i in 0..n {
+        let r = match i % 4 {
+            // From outside, aimed at a random triangle's centroid.
+            0 => {
+                let t = tris[(rng.u64() % tris.len() as u64) as usize];
+                let target = (t[0] + t[1] + t[2]) / 3.0;
+                let o = (lo + hi) * 0.5 + rng.unit_vector() * size * 2.0;
+                Ray::new(o, target - o)
+            }
+            // From inside the bounds in a random direction.
+            1 => Ray::new(
+                lo + (hi - lo) * Vec3::new(rng.f32(), rng.f32(), rng.f32()),
+                rng.unit_vector(),
+            ),
+            // Axis-aligned, with exact zeros and -0.0 components.
+            2 => {
+                let mut d = [0.0f32; 3];
+                let a = (rng.u64() % 3) as usize;
+                d[a] = if rng.f32() < 0.5 { 1.0 } else { -1.0 };
+                for (k, x) in d.iter_mut().enumerate() {
+                    if k != a && rng.f32() < 0.5 {
+                        *x = -0.0;
+                    }
+                }
+                Ray::new(
+                    lo + (hi - lo) * Vec3::new(rng.f32(), rng.f32(), rng.f32()),
+                    Vec3::from_array(d),
+                )
+            }
+            // A limited range [tmin, tmax).
+            _ => {
+                let o = (lo + hi) * 0.5 + rng.unit_vector() * size;
+                Ray::with_range(o, rng.unit_vector(), size * rng.f32() * 0.5, size * (0.5 + rng.f32()))
+            }
+        };
+        out.push(r);
+    }
+    // Bad rays: NaN, infinite, zero direction, empty range.
+    out.push(Ray::new(Vec3::NAN, Vec3::X));
+    out.push(Ray::new(Vec3::ZERO, Vec3::new(f32::NAN, 1.0, 0.0)));
+    out.push(Ray::new(Vec3::ZERO, Vec3::ZERO));
+    out.push(Ray::new(Vec3::splat(f32::INFINITY), Vec3::X));
+    out.push(Ray::with_range(lo, hi - lo, 1.0, 0.5));
+    out
+}
+
+fn same(a: Option<Hit>, b: Option<Hit>, tris: &[Triangle], ray: &Ray, what: &str) {
+    match (a, b) {
+        (None, None) => {}
+        (Some(x), Some(y)) if x.t.to_bits() == y.t.to_bits() => {
+            if x.prim != y.prim {
+                // A tie: both triangles must be hit at exactly this t.
+                let r = strahl::intersect::PreparedRay::new(ray);
+                let t = |p: u32| strahl::intersect::watertight::intersect_scalar(&r, &tris[p as usize], p).map(|h| h.t);
+                let m = |p: u32| strahl::intersect::moller::intersect_scalar(&r, &tris[p as usize], p).map(|h| h.t);
+                assert!(
+                    (t(x.prim) == Some(x.t) || m(x.prim) == Some(x.t))
+                        && (t(y.prim) == Some(y.t) || m(y.prim) == Some(y.t)),
+                    "{what}: different primitives {} and {} at t {}",
+                    x.prim,
+                    y.prim,
+                    x.t
+                );
+            }
+        }
+        _ => panic!("{what}: {a:?} vs {b:?} for {ray:?}"),
+    }
+}
+
+fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
+    let rays = rays(tris, n_rays, 7);
+    for (pname, params) in [
+        ("fastest", BuildParams::fastest()),
+        ("fast", BuildParams::fast()),
+        ("quality", BuildParams::quality()),
+        ("median", BuildParams::median()),
+    ] {
+        let (b2, _) = Bvh2::build(tris, &params).unwrap();
+        let b4 = Bvh4::from_bvh2(&b2, tris).unwrap();
+        let b8 = Bvh8::from_bvh2(&b2, tris).unwrap();
+        for ray in &rays {
+            let what = format!("{name} / {pname} / {}", T::NAME);
+            let brute = intersect_brute_force::<T, _>(tris, ray);
+            let h2 = b2.intersect::<T, _>(tris, ray);
+            same(h2, brute, tris, ray, &format!("{what}: bvh2 vs brute"));
+            same(
+                b4.intersect::<T>(ray),
+                brute,
+                tris,
+                ray,
+                &format!("{what}: bvh4 vs brute"),
+            );
+            same(
+                b8.intersect::<T>(ray),
+                brute,
+                tris,
+                ray,
+                &format!("{what}: bvh8 vs brute"),
+            );
+            let any = occluded_brute_force::<T, _>(tris, ray);
+            assert_eq!(b4.occluded::<T>(ray), any, "{what}: bvh4 occluded {ray:?}");
+            assert_eq!(b8.occluded::<T>(ray), any, "{what}: bvh8 occluded {ray:?}");
+        }
+    }
+}
+
+fn random_soup(n: usize, seed: u64) -> Vec<Triangle> {
+    let mut rng = Rng::new(seed);
+    (0..n)
+        .map(|_| {
+            let c = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 10.0;
+            [
+                c + rng.unit_vector() * 0.3,
+                c + rng.unit_vector() * 0.3,
+                c + rng.unit_vector() * 0.3,
+            ]
+        })
+        .collect()
+}
+
+#[test]
+fn random_scenes() {
+    let tris = random_soup(3000, 1);
+    check_scene::<Watertight>("random soup", &tris, 600);
+    check_scene::<Moller>("random soup", &tris, 600);
+    check_scene::<Watertight>("thin soup", &scene::thin_soup(2000, 3), 400);
+}
+
+#[test]
+fn clustered_and_mesh_scenes() {
+    check_scene::<Watertight>("clustered", &scene::clustered_soup(3000, 5, 2), 500);
+    check_scene::<Watertight>("bunny", &scene::bunny().to_soup(), 500);
+    check_scene::<Moller>("icosphere", &scene::icosphere(3).to_soup(), 300);
+}
+
+#[test]
+fn adversarial_scenes() {
+    let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    // Identical triangles: every hit ties.
+    check_scene::<Watertight>("same triangle x 500", &vec![t; 500], 200);
+    // Degenerate, NaN and infinite triangles mixed in.
+    let mut bad = random_soup(500, 4);
+    bad.push([Vec3::ZERO, Vec3::X, Vec3::X * 2.0]);
+    bad.push([Vec3::NAN, Vec3::X, Vec3::Y]);
+    bad.push([Vec3::splat(f32::INFINITY), Vec3::X, Vec3::Y]);
+    bad.push([Vec3::splat(5.0); 3]);
+    check_scene::<Watertight>("with degenerate and non-finite", &bad, 400);
+    // Coordinates from 1e-8 to 1e8.
+    let mut rng = Rng::new(9);
+    let scales: Vec<Triangle> = (0..1000)
+        .map(|i| {
+            let s = 10f32.powf(-8.0 + 16.0 * (i as f32 / 1000.0));
+            let c = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * s;
+            [c, c + Vec3::X * s * 0.1, c + Vec3::Y * s * 0.1]
+        })
+        .collect();
+    check_scene::<Watertight>("1e-8 .. 1e8", &scales, 400);
+    // A geometric series: a deep tree.
+    let series: Vec<Triangle> = (0..200)
+        .map(|i| {
+            let x = 2f32.powi(-i);
+            [Vec3::new(x, 0.0, 0.0), Vec3::new(x, 1.0, 0.0), Vec3::new(x, 0.0, 1.0)]
+        })
+        .collect();
+    check_scene::<Watertight>("geometric series", &series, 300);
+    // Empty and single-triangle scenes.
+    check_scene::<Watertight>("one triangle", &[t], 50);
+    let none: Vec<Triangle> = Vec::new();
+    let (b2, _) = Bvh2::build(&none[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &none[..]).unwrap();
+    assert!(b8.intersect::<Watertight>(&Ray::new(Vec3::ZERO, Vec3::X)).is_none());
+    assert!(!b8.occluded::<Watertight>(&Ray::new(Vec3::ZERO, Vec3::X)));
+}
+
+#[test]
+fn batch_and_parallel_batch_agree_with_single_rays() {
+    let tris = scene::bunny().to_soup();
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    let rays = rays(&tris, 5000, 11);
+    let mut hits = vec![None; rays.len()];
+    b8.intersect_batch_par::<Watertight>(&rays, &mut hits, 3);
+    let mut occ = vec![false; rays.len()];
+    b8.occluded_batch_par::<Watertight>(&rays, &mut occ, 2);
+    for (i, r) in rays.iter().enumerate() {
+        assert_eq!(hits[i], b8.intersect::<Watertight>(r));
+        assert_eq!(occ[i], b8.occluded::<Watertight>(r));
+    }
+}
+
+/// Every lane of a packet equals single-ray traversal, for every switch threshold, with mixed
+/// directions, inactive lanes (short slices), NaN lanes, zero components and -0.0.
+#[test]
+fn packets_equal_single_rays() {
+    use strahl::traverse::packet;
+    for (name, tris) in [
+        ("bunny", scene::bunny().to_soup()),
+        ("random", random_soup(2000, 3)),
+        ("same triangle", vec![[Vec3::ZERO, Vec3::X, Vec3::Y]; 100]),
+    ] {
+        let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+        let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+        let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+        let mut all = rays(&tris, 800, 21);
+        // Coherent packets too: 8 rays from one eye through neighbouring points.
+        let b = tris.iter().flatten().fold(Vec3::NEG_INFINITY, |m, v| m.max(*v));
+        for i in 0..400 {
+            let eye = b * 2.0 + Vec3::splat(1.0);
+            let target = Vec3::new((i % 20) as f32 / 20.0, (i / 20) as f32 / 20.0, 0.3) * b;
+            all.push(Ray::new(eye, target - eye));
+        }
+        for switch in [0, 3, 9] {
+            for (k, chunk) in all.chunks(8).enumerate() {
+                // Some packets are short (inactive lanes), some get NaN lanes.
+                let mut chunk = chunk.to_vec();
+                if k % 5 == 1 {
+                    chunk[0] = Ray::new(Vec3::NAN, Vec3::X);
+                }
+                let len = if k % 7 == 3 { 3.min(chunk.len()) } else { chunk.len() };
+                let mut h8 = [None; 8];
+                let mut h4 = [None; 8];
+                packet::intersect8::<Watertight, _, 8>(b8.view(), &chunk[..len], &mut h8, switch);
+                packet::intersect8::<Watertight, _, 4>(b4.view(), &chunk[..len], &mut h4, switch);
+                for (i, r) in chunk[..len].iter().enumerate() {
+                    let single = b8.intersect::<Watertight>(r);
+                    same(h8[i], single, &tris, r, &format!("{name} packet8/bvh8 switch {switch}"));
+                    same(h4[i], single, &tris, r, &format!("{name} packet8/bvh4 switch {switch}"));
+                }
+                assert!(h8[len..].iter().all(|h| h.is_none()));
+                let mut o8 = [false; 8];
+                let mut o4 = [false; 8];
+                packet::occluded8::<Watertight, _, 8>(b8.view(), &chunk[..len], &mut o8);
+                packet::occluded8::<Watertight, _, 4>(b4.view(), &chunk[..len], &mut o4);
+                for (i, r) in chunk[..len].iter().enumerate() {
+                    let single = b8.occluded::<Watertight>(r);
+                    assert_eq!(o8[i], single, "{name} occluded8/bvh8 {r:?}");
+                    assert_eq!(o4[i], single, "{name} occluded8/bvh4 {r:?}");
+                }
+            }
+        }
+    }
+}
