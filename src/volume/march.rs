@@ -403,10 +403,9 @@ fn set_lane(v: &mut f32x8, l: usize, x: f32) {
     *v = f32x8::new(a);
 }
 
-/// Lane state of the 8-wide marcher: one ray per lane, in SoA form.
-struct Lanes {
-    ray: [usize; 8],
-    span: [Span; 8],
+/// What the 8-wide marcher updates every step, one ray per lane, in SoA form.
+#[derive(Clone, Copy)]
+struct LaneVecs {
     ge: [f32x8; 3],
     gd: [f32x8; 3],
     len: f32x8,
@@ -414,6 +413,15 @@ struct Lanes {
     k: f32x8,
     col: [f32x8; 3],
     acc: f32x8,
+}
+
+/// Lane state of the 8-wide marcher.
+struct Lanes {
+    ray: [usize; 8],
+    span: [Span; 8],
+    /// PERF: the marching loop works on a copy of these in registers and writes it back only
+    /// around the (rare) calls that change a lane, so no step stores to memory with a mask.
+    v: LaneVecs,
 }
 
 impl Lanes {
@@ -428,14 +436,15 @@ impl Lanes {
         next: &mut usize,
         stats: &mut MarchStats,
     ) {
+        let v = &mut self.v;
         if self.ray[l] != usize::MAX {
             out[self.ray[l]] = Rgba {
-                r: self.col[0].lane(l),
-                g: self.col[1].lane(l),
-                b: self.col[2].lane(l),
-                a: self.acc.lane(l),
+                r: v.col[0].lane(l),
+                g: v.col[1].lane(l),
+                b: v.col[2].lane(l),
+                a: v.acc.lane(l),
             };
-            stats.terminated += (self.k.lane(l) < self.n.lane(l)) as u64;
+            stats.terminated += (v.k.lane(l) < v.n.lane(l)) as u64;
             self.ray[l] = usize::MAX;
         }
         let mut sp = Span::default();
@@ -452,15 +461,16 @@ impl Lanes {
             out[i] = Rgba::ZERO;
         }
         self.span[l] = sp;
+        let v = &mut self.v;
         for a in 0..3 {
-            set_lane(&mut self.ge[a], l, sp.ge[a]);
-            set_lane(&mut self.gd[a], l, sp.gd[a]);
-            set_lane(&mut self.col[a], l, 0.0);
+            set_lane(&mut v.ge[a], l, sp.ge[a]);
+            set_lane(&mut v.gd[a], l, sp.gd[a]);
+            set_lane(&mut v.col[a], l, 0.0);
         }
-        set_lane(&mut self.len, l, sp.len);
-        set_lane(&mut self.n, l, sp.n as f32);
-        set_lane(&mut self.k, l, 0.0);
-        set_lane(&mut self.acc, l, 0.0);
+        set_lane(&mut v.len, l, sp.len);
+        set_lane(&mut v.n, l, sp.n as f32);
+        set_lane(&mut v.k, l, 0.0);
+        set_lane(&mut v.acc, l, 0.0);
     }
 }
 
@@ -507,13 +517,15 @@ pub fn integrate_x8<M: Medium>(
     let mut ln = Lanes {
         ray: [usize::MAX; 8],
         span: [Span::default(); 8],
-        ge: [z; 3],
-        gd: [z; 3],
-        len: z,
-        n: z,
-        k: z,
-        col: [z; 3],
-        acc: z,
+        v: LaneVecs {
+            ge: [z; 3],
+            gd: [z; 3],
+            len: z,
+            n: z,
+            k: z,
+            col: [z; 3],
+            acc: z,
+        },
     };
     let mut next = 0usize;
     for l in 0..8 {
@@ -523,56 +535,59 @@ pub fn integrate_x8<M: Medium>(
     let thr = f32x8::splat(ctx.thr);
     let (zero, one, half) = (f32x8::splat(0.0), f32x8::splat(1.0), f32x8::splat(0.5));
     let mut regions = [EmptyRegion::default(); 8];
+    let mut v = ln.v;
     loop {
         // Lanes with a ray, samples left and opacity below the threshold.
-        let live = ln.k.lt(ln.n) & ln.acc.lt(thr);
+        let live = v.k.lt(v.n) & v.acc.lt(thr);
         let active = live.bitmask();
         if active == 0 {
             break;
         }
         // The step's position, as `Ctx::position` per lane.
-        let s0 = ln.k * dt;
-        let h = dt.min_l(ln.len - s0).max_l(zero);
+        let s0 = v.k * dt;
+        let h = dt.min_l(v.len - s0).max_l(zero);
         let s = if ctx.mid { s0 + half * h } else { s0 };
-        let g = [
-            ln.ge[0] + ln.gd[0] * s,
-            ln.ge[1] + ln.gd[1] * s,
-            ln.ge[2] + ln.gd[2] * s,
-        ];
+        let g = [v.ge[0] + v.gd[0] * s, v.ge[1] + v.gd[1] * s, v.ge[2] + v.gd[2] * s];
         match m.lookup_x8(&g, active, &mut regions) {
             Err(mask) => {
                 // Some lanes are in empty regions: move them on, then look again.
+                ln.v = v;
                 let mut bits = mask & active;
                 while bits != 0 {
                     let l = bits.trailing_zeros() as usize;
                     bits &= bits - 1;
-                    let k = ln.k.lane(l) as u32;
+                    let k = ln.v.k.lane(l) as u32;
                     let gl = [g[0].lane(l), g[1].lane(l), g[2].lane(l)];
                     let kn = ctx.skip(m, &ln.span[l], k, gl, &regions[l]);
                     stats.skipped += (kn - k) as u64;
-                    set_lane(&mut ln.k, l, kn as f32);
+                    set_lane(&mut ln.v.k, l, kn as f32);
                     if kn >= ln.span[l].n {
                         ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
                     }
                 }
+                v = ln.v;
             }
             Ok(smp) => {
                 let a = one_minus_exp_neg_x8(smp.tau * h);
-                let w = (one - ln.acc) * a;
+                let w = (one - v.acc) * a;
                 for c in 0..3 {
-                    ln.col[c] = live.select(ln.col[c] + w * smp.color[c], ln.col[c]);
+                    v.col[c] = live.select(v.col[c] + w * smp.color[c], v.col[c]);
                 }
-                ln.acc = live.select(ln.acc + w, ln.acc);
+                v.acc = live.select(v.acc + w, v.acc);
                 // Every lane with a ray is live here (finished ones were refilled at once), so k
                 // steps unconditionally: the next positions do not wait for this step's opacity.
-                ln.k += one;
+                v.k += one;
                 stats.samples += active.count_ones() as u64;
-                let done = active & !(ln.k.lt(ln.n) & ln.acc.lt(thr)).bitmask();
-                let mut bits = done;
-                while bits != 0 {
-                    let l = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
+                let done = active & !(v.k.lt(v.n) & v.acc.lt(thr)).bitmask();
+                if done != 0 {
+                    ln.v = v;
+                    let mut bits = done;
+                    while bits != 0 {
+                        let l = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
+                    }
+                    v = ln.v;
                 }
             }
         }

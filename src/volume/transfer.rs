@@ -239,14 +239,18 @@ impl<'a> TransferFunction<'a> {
         let j = j.to_array();
         // PERF: entries j and j + 1 are 8 adjacent floats: one unaligned load per lane, then an
         // 8 x 8 transpose gives r0, g0, b0, tau0, r1, g1, b1, tau1 across the lanes.
-        let flat: &[f32] = bytemuck::cast_slice(self.entries);
-        let rows: [f32x8; 8] = core::array::from_fn(|l| {
-            let at = j[l] as usize * 4;
-            match flat.get(at..at + 8) {
-                Some(r) => f32x8::new(r.try_into().unwrap_or([0.0; 8])),
-                None => f32x8::splat(0.0), // unreachable: j <= n - 2
-            }
-        });
+        let e = self.entries;
+        if e.len() < 2 {
+            return (f32x8::splat(0.0), [f32x8::splat(0.0); 3]); // unreachable: last_idx > 0
+        }
+        // NOTE: the clamp never moves a row (j <= n - 2); it only lets the compiler drop the
+        // bounds checks.
+        let jmax = e.len() - 2;
+        let row = |l: usize| {
+            let i = (j[l] as u32 as usize).min(jmax);
+            f32x8::new(bytemuck::cast::<[TfEntry; 2], [f32; 8]>([e[i], e[i + 1]]))
+        };
+        let rows = [row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7)];
         let [r0, g0, b0, t0, r1, g1, b1, t1] = f32x8::transpose(rows);
         let l = |a: f32x8, b: f32x8| a + (b - a) * w;
         (l(t0, t1), [l(r0, r1), l(g0, g1), l(b0, b1)])
