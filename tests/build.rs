@@ -2,7 +2,9 @@
 //! builder, and closest hit / any hit through every builder's tree against brute force over all
 //! primitives, with both triangle tests.
 
-use strahl::build::{BuildError, BuildParams, Bvh2, MortonBits, Strategy, ValidateError};
+use strahl::build::{
+    BinAxes, BuildError, BuildParams, Bvh2, MortonBits, Refine, Strategy, TreeletParams, ValidateError,
+};
 use strahl::geometry::{Triangle, TriangleSoup, Triangles};
 use strahl::scene::{self, Rng};
 use strahl::traverse::{
@@ -41,6 +43,48 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
                 morton_bits: MortonBits::Bits63,
                 min_leaf_size: 2,
                 max_leaf_size: 8,
+                ..BuildParams::fastest()
+            },
+        ),
+        ("hybrid", BuildParams::hybrid()),
+        (
+            "hlbvh4-63-leaf2",
+            BuildParams {
+                strategy: Strategy::Hlbvh,
+                cluster_size: 4,
+                morton_bits: MortonBits::Bits63,
+                min_leaf_size: 2,
+                max_leaf_size: 8,
+                ..BuildParams::fastest()
+            },
+        ),
+        (
+            "hlbvh1-longest",
+            BuildParams {
+                strategy: Strategy::Hlbvh,
+                cluster_size: 1,
+                bin_axes: BinAxes::Longest,
+                ..BuildParams::fastest()
+            },
+        ),
+        (
+            "binned-treelets5x3",
+            BuildParams {
+                refine: Refine::Treelets(TreeletParams {
+                    leaves: 5,
+                    min_prims: 1,
+                    rounds: 3,
+                }),
+                ..BuildParams::fast()
+            },
+        ),
+        (
+            "lbvh-treelets8",
+            BuildParams {
+                refine: Refine::Treelets(TreeletParams {
+                    leaves: 8,
+                    ..TreeletParams::default()
+                }),
                 ..BuildParams::fastest()
             },
         ),
@@ -421,7 +465,27 @@ fn invalid_params_are_errors() {
         },
         BuildParams { max_depth: 65, ..base },
         BuildParams { max_depth: 10, ..base },
-    ];
+        BuildParams {
+            cluster_size: 0,
+            ..BuildParams::hybrid()
+        },
+        BuildParams {
+            cluster_size: (1 << 16) + 1,
+            ..BuildParams::hybrid()
+        },
+    ]
+    .into_iter()
+    .chain(
+        [(2, 1, 1), (9, 1, 1), (7, 0, 1), (7, 1, 0), (7, 1, 17)].map(|(leaves, min_prims, rounds)| BuildParams {
+            refine: Refine::Treelets(TreeletParams {
+                leaves,
+                min_prims,
+                rounds,
+            }),
+            ..base
+        }),
+    )
+    .collect::<Vec<_>>();
     for p in bad {
         let e = Bvh2::build(&tris[..], &p).unwrap_err();
         assert!(matches!(e, BuildError::InvalidParams(_)), "{p:?}");

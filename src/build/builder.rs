@@ -1,8 +1,13 @@
 //! [`Builder`]: the builders' working memory, kept between builds.
 
+use super::lbvh::WalkStack;
 use super::prims::{self, PrimRef};
 use super::radix::Item;
-use super::{BuildError, BuildParams, BuildStats, Bvh2, Primitives, Strategy, lbvh, sweep, topdown};
+use super::treelet::{self, TreeletScratch, TreeletStats};
+use super::{
+    BuildError, BuildParams, BuildStats, Bvh2, Primitives, Refine, Strategy, TreeletParams, ValidateError, hlbvh, lbvh,
+    sweep, topdown,
+};
 use alloc::vec::Vec;
 
 /// Reusable working memory for [`Bvh2`] builds.
@@ -45,6 +50,16 @@ pub struct Builder {
     /// The full sweep's suffix areas and side flags.
     pub(crate) suffix: Vec<f32>,
     pub(crate) flags: Vec<bool>,
+    /// The HLBVH's clusters (sorted ranges), a range stack, one reference per cluster and the
+    /// second buffer for them, the top tree over the clusters, and the LBVH walk's stack.
+    pub(crate) clusters: Vec<[u32; 2]>,
+    pub(crate) ranges: Vec<[u32; 2]>,
+    pub(crate) crefs: Vec<PrimRef>,
+    pub(crate) calt: Vec<PrimRef>,
+    pub(crate) top: Bvh2,
+    pub(crate) walk: WalkStack,
+    /// Treelet restructuring's per-node state.
+    pub(crate) treelet: TreeletScratch,
 }
 
 /// What a builder reports besides the tree.
@@ -92,16 +107,49 @@ impl Builder {
                 Strategy::Median | Strategy::BinnedSah => topdown::build(self, &info, params, out),
                 Strategy::SweepSah => sweep::build(self, &info, params, out),
                 Strategy::Lbvh => lbvh::build(self, &info, params, out),
+                Strategy::Hlbvh => hlbvh::build(self, &info, params, out),
             }
         };
         debug_assert_eq!(out.prim_indices.len(), n);
-        Ok(BuildStats {
+        let mut stats = BuildStats {
             primitives: n as u32,
             invalid: info.invalid,
             nodes: out.nodes.len() as u32,
             leaves: c.leaves,
             max_depth: c.max_depth,
             forced_splits: c.forced_splits,
-        })
+            restructured: 0,
+        };
+        if let (Refine::Treelets(t), true) = (params.refine, n > 0) {
+            // NOTE: a tree just built is well formed; the pass cannot fail on it.
+            if let Ok(r) = treelet::optimize(out, &t, params.max_depth, &mut self.treelet) {
+                stats.max_depth = r.max_depth;
+                stats.restructured = r.restructured;
+            }
+        }
+        Ok(stats)
+    }
+
+    /// [`Bvh2::optimize_treelets`] with this builder's memory (kept for the next call).
+    ///
+    /// ```
+    /// use strahl::{build::{Builder, BuildParams, TreeletParams}, scene};
+    /// let soup = scene::clustered_soup(3000, 5, 1);
+    /// let mut builder = Builder::new();
+    /// let (mut bvh, _) = builder.build(&soup[..], &BuildParams::fast()).unwrap();
+    /// let before = bvh.sah_cost(1.0, 1.0);
+    /// let p = TreeletParams { leaves: 5, rounds: 2, ..TreeletParams::default() };
+    /// builder.optimize_treelets(&mut bvh, &p, 64).unwrap();
+    /// assert!(bvh.sah_cost(1.0, 1.0) <= before);
+    /// assert!(bvh.validate(&soup[..]).is_ok());
+    /// ```
+    pub fn optimize_treelets(
+        &mut self,
+        bvh: &mut Bvh2,
+        params: &TreeletParams,
+        max_depth: u32,
+    ) -> Result<TreeletStats, ValidateError> {
+        let max_depth = max_depth.min(crate::traverse::MAX_DEPTH);
+        treelet::optimize(bvh, params, max_depth, &mut self.treelet)
     }
 }

@@ -29,7 +29,7 @@ use alloc::vec::Vec;
 use glam::Vec3;
 
 /// A sort key: 30-bit codes in `u32`, 63-bit codes in `u64`.
-trait Code: super::radix::RadixKey {
+pub(crate) trait Code: super::radix::RadixKey {
     /// The highest bit in which `a` and `b` differ, if any.
     fn high_bit_of_xor(a: Self, b: Self) -> Option<u32>;
     fn bit_set(self, bit: u32) -> bool;
@@ -101,7 +101,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
 
 /// The code of every reference's doubled centroid, with the reference's position, into `codes`;
 /// eight at a time.
-fn codes_of<K: Copy>(
+pub(crate) fn codes_of<K: Copy>(
     refs: &[PrimRef],
     codes: &mut Vec<Item<K>>,
     one: impl Fn(Vec3) -> K,
@@ -136,7 +136,8 @@ fn codes_of<K: Copy>(
 }
 
 /// A step of the hierarchy walk.
-enum Step {
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Step {
     /// Split (or make a leaf of) sorted range `begin..end` into node `node`.
     Visit {
         node: u32,
@@ -144,8 +145,20 @@ enum Step {
         end: u32,
         depth: u32,
     },
-    /// Both children of `node` are done: its box is their union.
-    Finish { node: u32 },
+    /// Both children of `node` (over `begin..end`) are done: its box is their union.
+    Finish { node: u32, begin: u32, end: u32 },
+}
+
+/// The hierarchy walk's stacks, and whether it makes SAH leaves.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct WalkStack {
+    steps: Vec<Step>,
+    /// SAH costs and heights of finished subtrees (with `sah_leaves`), post-order.
+    costs: Vec<(f32, u32)>,
+    /// Collapse a finished subtree of at most `max_leaf_size` primitives into one leaf where
+    /// the leaf is cheaper by the SAH (its nodes are the last ones in the array, so this is a
+    /// truncation). Off for [`Strategy::Lbvh`](super::Strategy::Lbvh).
+    pub sah_leaves: bool,
 }
 
 /// Builds the tree over the sorted `codes` (each with the position of its reference).
@@ -157,31 +170,102 @@ fn hierarchy<K: Code>(
     out: &mut Bvh2,
 ) -> Counters {
     let n = refs.len();
-    // Gather the references into Morton order: one tight pass of random reads, after which every
-    // leaf reads a contiguous run.
+    gather(refs, sorted, codes, out);
+    let mut c = Counters::default();
+    out.nodes.reserve((2 * n).saturating_sub(1));
+    out.nodes.push(<Node as bytemuck::Zeroable>::zeroed());
+    // Left children are visited first; the stack holds a right sibling and a finish per level.
+    let mut stack = WalkStack::default();
+    stack.steps.reserve(2 * p.max_depth as usize + 2);
+    walk(
+        &mut out.nodes,
+        sorted,
+        codes,
+        p,
+        [0, 0, n as u32, 1],
+        &mut stack,
+        &mut c,
+    );
+    c
+}
+
+/// Gathers the references into Morton order (one tight pass of random reads, after which every
+/// leaf reads a contiguous run) and writes the primitive indices in that order.
+pub(crate) fn gather<K>(refs: &[PrimRef], sorted: &mut Vec<PrimRef>, codes: &[Item<K>], out: &mut Bvh2) {
     sorted.clear();
     sorted.extend(codes.iter().map(|it| refs[it.val as usize]));
     out.prim_indices.extend(sorted.iter().map(PrimRef::index));
+}
 
-    let mut c = Counters::default();
-    let nodes = &mut out.nodes;
-    nodes.reserve((2 * n).saturating_sub(1));
+/// Where the LBVH splits sorted range `b..e` (`e - b >= 2`): the first code with the highest
+/// differing bit of the range set, or, where all codes are equal, at the highest bit in which
+/// the ends' positions differ. Always strictly inside the range for sorted codes.
+#[inline]
+pub(crate) fn split_point<K: Code>(codes: &[Item<K>], b: u32, e: u32) -> u32 {
+    let (first, last) = (codes[b as usize].key, codes[e as usize - 1].key);
+    match K::high_bit_of_xor(first, last) {
+        // The first code in the range with that bit set (the range shares every higher bit).
+        Some(bit) => b + codes[b as usize..e as usize].partition_point(|c| !c.key.bit_set(bit)) as u32,
+        // All codes equal: split the appended positions at their highest differing bit.
+        None => {
+            let bit = 31 - (b ^ (e - 1)).leading_zeros();
+            (e - 1) >> bit << bit
+        }
+    }
+}
+
+/// The hierarchy over sorted range `begin..end` into the existing node `root` at `depth`
+/// (`task = [root, begin, end, depth]`), appending nodes; `sorted` holds the gathered references.
+/// `stack` is scratch (left empty).
+pub(crate) fn walk<K: Code>(
+    nodes: &mut Vec<Node>,
+    sorted: &[PrimRef],
+    codes: &[Item<K>],
+    p: &BuildParams,
+    task: [u32; 4],
+    ws: &mut WalkStack,
+    c: &mut Counters,
+) {
     let blank = <Node as bytemuck::Zeroable>::zeroed();
-    nodes.push(blank);
-    // Left children are visited first; the stack holds a right sibling and a finish per level.
-    let mut stack: Vec<Step> = Vec::with_capacity(2 * p.max_depth as usize + 2);
+    let [node, begin, end, depth] = task;
+    let WalkStack {
+        steps: stack,
+        costs,
+        sah_leaves,
+    } = ws;
+    let sah = *sah_leaves;
+    stack.clear();
+    costs.clear();
     stack.push(Step::Visit {
-        node: 0,
-        begin: 0,
-        end: n as u32,
-        depth: 1,
+        node,
+        begin,
+        end,
+        depth,
     });
     while let Some(step) = stack.pop() {
         let (node, b, e, depth) = match step {
-            Step::Finish { node } => {
+            Step::Finish { node, begin, end } => {
                 let l = nodes[node as usize].left() as usize;
                 let bx = Box8::from_node(&nodes[l]).union(Box8::from_node(&nodes[l + 1]));
                 nodes[node as usize] = bx.to_node(l as u32, 0);
+                if sah {
+                    // Post-order: the children's costs are the top two.
+                    let ((cr, hr), (cl, hl)) = (costs.pop().unwrap_or_default(), costs.pop().unwrap_or_default());
+                    let area = bx.half_area_nonempty();
+                    let count = end - begin;
+                    let split = p.traversal_cost * area + cl + cr;
+                    let leaf = p.intersection_cost * count as f32 * area;
+                    if count <= p.max_leaf_size && leaf <= split {
+                        // The subtree's nodes are the last ones: drop them, keep the leaf.
+                        c.leaves -= leaves_below(count, &nodes[l..]);
+                        c.leaves += 1;
+                        nodes.truncate(l);
+                        nodes[node as usize] = bx.to_node(begin, count);
+                        costs.push((leaf, 1));
+                    } else {
+                        costs.push((split, hl.max(hr) + 1));
+                    }
+                }
                 continue;
             }
             Step::Visit {
@@ -191,7 +275,9 @@ fn hierarchy<K: Code>(
                 depth,
             } => (node, begin, end, depth),
         };
-        c.max_depth = c.max_depth.max(depth);
+        if !sah {
+            c.max_depth = c.max_depth.max(depth);
+        }
         let count = e - b;
         let (first, last) = (codes[b as usize].key, codes[e as usize - 1].key);
         if count <= p.min_leaf_size || (count <= p.max_leaf_size && first == last) {
@@ -200,17 +286,12 @@ fn hierarchy<K: Code>(
                 .fold(Box8::EMPTY, |acc, r| acc.union(r.bounds()));
             nodes[node as usize] = bx.to_node(b, count);
             c.leaves += 1;
+            if sah {
+                costs.push((p.intersection_cost * count as f32 * bx.half_area_nonempty(), 1));
+            }
             continue;
         }
-        let mut mid = match K::high_bit_of_xor(first, last) {
-            // The first code in the range with that bit set (the range shares every higher bit).
-            Some(bit) => b + codes[b as usize..e as usize].partition_point(|c| !c.key.bit_set(bit)) as u32,
-            // All codes equal: split the appended positions at their highest differing bit.
-            None => {
-                let bit = 31 - (b ^ (e - 1)).leading_zeros();
-                (e - 1) >> bit << bit
-            }
-        };
+        let mut mid = split_point(codes, b, e);
         debug_assert!(b < mid && mid < e);
         if !(b < mid && mid < e && depth_ok(depth, mid - b, e - mid, p.max_depth)) {
             c.forced_splits += 1;
@@ -220,7 +301,7 @@ fn hierarchy<K: Code>(
         nodes[node as usize].index = left;
         nodes.push(blank);
         nodes.push(blank);
-        stack.push(Step::Finish { node });
+        stack.push(Step::Finish { node, begin: b, end: e });
         stack.push(Step::Visit {
             node: left + 1,
             begin: mid,
@@ -234,5 +315,14 @@ fn hierarchy<K: Code>(
             depth: depth + 1,
         });
     }
-    c
+    if let Some(&(_, h)) = costs.last() {
+        c.max_depth = c.max_depth.max(depth + h - 1);
+    }
+}
+
+/// Leaves among `nodes` (a collapsed subtree's nodes, at most `2 count - 2` of them).
+#[inline]
+fn leaves_below(count: u32, nodes: &[Node]) -> u32 {
+    debug_assert!(nodes.len() <= 2 * count as usize);
+    nodes.iter().filter(|n| n.is_leaf()).count() as u32
 }

@@ -1,5 +1,6 @@
 //! BVH2 construction: [`Bvh2`] and its builders (object median, full-sweep SAH, binned SAH,
-//! LBVH), [`Bvh2::validate`], [`Bvh2::refit`] and [`Bvh2::sah_cost`].
+//! LBVH, HLBVH), treelet restructuring ([`Bvh2::optimize_treelets`]), [`Bvh2::validate`],
+//! [`Bvh2::refit`] and [`Bvh2::sah_cost`].
 //!
 //! Pipeline stage: after [`geometry`](crate::geometry), before `layout` (wide nodes) and
 //! [`traverse`](crate::traverse). Input: anything that implements [`Primitives`] (every
@@ -14,6 +15,8 @@
 //! | [`BinnedSah`](Strategy::BinnedSah) | Wald, "On fast construction of SAH-based BVHs", 2007 | bin three axes (or the longest, [`BinAxes`]) in one pass, sweep the bins, branch-free partition; exact sweep at 8 references or fewer | O(n log n) |
 //! | [`SweepSah`](Strategy::SweepSah) | MacDonald and Booth 1990; Wald, Boulos, Shirley 2007 | sweep every boundary of three pre-sorted lists, stable partition, O(n) | O(n log n) after three radix sorts |
 //! | [`Lbvh`](Strategy::Lbvh) | Lauterbach et al. 2009; Karras 2012 | binary search for the highest differing bit | O(n) after a radix sort |
+//! | [`Hlbvh`](Strategy::Hlbvh) | Pantaleoni and Luebke 2010; Garanzha et al. 2011 | LBVH bottoms in clusters of up to [`cluster_size`](BuildParams::cluster_size) codes (SAH leaf collapse), binned SAH over the clusters' boxes on top | O(n) after a radix sort, plus binned SAH over the clusters |
+//! | [`Refine::Treelets`] (after any of them) | Karras and Aila 2013 (TRBVH) | best topology of a 3 ..= 8-leaf treelet by dynamic programming over its leaf subsets, `~3^k / 2` steps | O(n) per round |
 //!
 //! The top-down builders share one loop (pbrt's `BUILD(node)`: split, group left and right,
 //! recurse, else make a leaf), written iteratively with an explicit task stack. Each task is a
@@ -88,6 +91,30 @@
 //! | `balanced()` | 4.9 | 25.2 | 1.3 to 2.3 |
 //! | `quality()` | 2.4 | 25.1 | 1.6 to 2.3 |
 //!
+//! **Hybrid and refinement** (`cargo test --release --test build_hybrid -- --ignored --nocapture
+//! timing`: warm builder, best of 3 (soup) or 50 (bunny) builds, on the same VM under a heavier
+//! load, average 5 to 6, so every builder ran 1.3 to 3.4 times slower than in the tables above;
+//! ranges over three runs, the presets beside them from the same runs):
+//!
+//! | builder | soup Mtri/s | soup SAH | bunny Mtri/s | bunny SAH |
+//! |---|---|---|---|---|
+//! | `fastest()` | 4.2 to 4.7 | 525.0 | 21 to 29 | 29.0 |
+//! | HLBVH, clusters of 32, no refinement | 2.7 to 4.0 | 508.8 | 9.6 to 16 | 28.0 |
+//! | HLBVH + treelets of 5 (one round) | 0.78 to 0.92 | 484.9 | 2.6 to 3.8 | 26.6 |
+//! | `hybrid()` (HLBVH + treelets of 7) | 0.40 to 0.45 | 479.4 | 1.2 to 1.6 | 26.3 |
+//! | `fast()` | 1.8 to 1.9 | 483.7 | 5.1 to 7.3 | 26.5 |
+//! | `balanced()` | 1.1 to 1.3 | 468.9 | 3.4 to 4.7 | 25.2 |
+//! | `quality()` | 0.35 to 0.44 | 466.0 | 1.7 to 2.3 | 25.1 |
+//!
+//! HLBVH builds at 60 to 85% of the LBVH's speed with a 3% better tree on the soup. The treelet
+//! pass does what it should for the tree (the hybrid is within 2.9% of the full sweep on the soup,
+//! 5% on the bunny; one round takes an LBVH from 525 to 503) but costs about 2 us per 7-leaf
+//! treelet on one core (the dynamic program, about 1,100 dependent steps), so one round at every
+//! node costs as much as a full-sweep build. On one core the binned builders are the better
+//! trade: `balanced()` builds faster than `hybrid()` and a better tree. The pass pays where the
+//! starting tree is poor and the primitives are many per treelet
+//! ([`min_prims`](TreeletParams::min_prims)), or to improve a tree that is kept.
+//!
 //! (Trace speeds of the bunny varied between runs by the load; ranges over two runs.) Where the
 //! time goes, single-threaded, on the soup: the binned builders spend about a third each in
 //! binning, in the per-node work of the roughly one million nodes of 2 to 8 references (split
@@ -98,6 +125,7 @@
 
 mod binned;
 mod builder;
+mod hlbvh;
 mod lbvh;
 mod params;
 mod prims;
@@ -105,11 +133,16 @@ pub mod radix;
 mod refit;
 mod sweep;
 mod topdown;
+mod treelet;
 mod validate;
 
 pub use builder::Builder;
-pub use params::{BinAxes, BuildParams, MAX_BINS, MAX_LEAF_SIZE, MIN_BINS, MIN_DEPTH, MortonBits, Strategy};
+pub use params::{
+    BinAxes, BuildParams, MAX_BINS, MAX_CLUSTER_SIZE, MAX_LEAF_SIZE, MIN_BINS, MIN_DEPTH, MortonBits, Refine, Strategy,
+    TreeletParams,
+};
 pub use prims::{MAX_PRIMITIVES, Primitives};
+pub use treelet::TreeletStats;
 pub use validate::{BvhStats, ValidateError};
 
 pub use crate::traverse::Node;
@@ -164,6 +197,8 @@ pub struct BuildStats {
     /// Splits not chosen by the strategy: object-median splits forced by the depth bound, and
     /// middle splits of ranges whose centroids all coincide.
     pub forced_splits: u32,
+    /// Treelets rearranged by [`BuildParams::refine`] (0 without it).
+    pub restructured: u32,
 }
 
 /// Why a build could not run.

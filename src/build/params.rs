@@ -20,6 +20,69 @@ pub enum Strategy {
     /// Linear BVH (Lauterbach 2009, Karras 2012): Morton codes of the centroids, one radix sort,
     /// splits where the highest differing bit changes. No SAH.
     Lbvh,
+    /// Hierarchical LBVH (Pantaleoni and Luebke 2010; Garanzha et al. 2011): the sorted Morton
+    /// codes are cut into clusters of at most [`cluster_size`](BuildParams::cluster_size)
+    /// primitives (runs of equal top bits, as many bits as a run needs to be that small), each
+    /// cluster is built as an LBVH bottom, and binned SAH ([`bins`](BuildParams::bins),
+    /// [`bin_axes`](BuildParams::bin_axes)) over the clusters' boxes builds the top. Nearly the
+    /// speed of [`Lbvh`](Self::Lbvh), a better tree.
+    Hlbvh,
+}
+
+/// A pass that improves a finished tree, after any [`Strategy`] ([`BuildParams::refine`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Refine {
+    /// No pass: the tree as the strategy built it.
+    None,
+    /// Treelet restructuring (Karras and Aila 2013), see
+    /// [`Bvh2::optimize_treelets`](super::Bvh2::optimize_treelets).
+    Treelets(TreeletParams),
+}
+
+/// The knobs of treelet restructuring ([`Refine::Treelets`],
+/// [`Bvh2::optimize_treelets`](super::Bvh2::optimize_treelets)).
+///
+/// Cost: one treelet is about `3^leaves / 2` steps of a dynamic program (1,100 for 7 leaves,
+/// 120 for 5), and one is formed at every interior node with at least `min_prims` primitives
+/// below it, once per round. Karras and Aila use 7 leaves, `gamma` = 7 and three rounds on a GPU;
+/// on one core that costs more than the build it refines, hence the default (measured in the
+/// [module docs](super#measured)).
+///
+/// ```
+/// use strahl::build::{BuildParams, Refine, TreeletParams};
+/// let t = TreeletParams { rounds: 2, ..TreeletParams::default() };
+/// let p = BuildParams { refine: Refine::Treelets(t), ..BuildParams::fastest() };
+/// assert!(p.check().is_ok());
+/// let bad = TreeletParams { leaves: 9, ..t };
+/// assert!(BuildParams { refine: Refine::Treelets(bad), ..p }.check().is_err());
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TreeletParams {
+    /// Leaves per treelet, in `3 ..= 8` (Karras: 7).
+    pub leaves: u32,
+    /// Treelets are formed only at nodes with at least this many primitives below them
+    /// (Karras' `gamma`; 1: at every interior node). `>= 1`.
+    pub min_prims: u32,
+    /// Bottom-up passes over the tree, in `1 ..= 16` (Karras: 3).
+    pub rounds: u32,
+}
+
+impl TreeletParams {
+    /// The default: 7 leaves, every node with at least 2 primitives, one round.
+    pub const fn new() -> Self {
+        Self {
+            leaves: 7,
+            min_prims: 2,
+            rounds: 1,
+        }
+    }
+}
+
+impl Default for TreeletParams {
+    /// [`TreeletParams::new`].
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 /// Which axes [`Strategy::BinnedSah`] bins.
@@ -51,6 +114,7 @@ pub enum MortonBits {
 /// | [`balanced`](Self::balanced) (= `default()`) | binned SAH, all axes | 16 | 1 ..= 8 | medium | better |
 /// | [`quality`](Self::quality) | full-sweep SAH | | 1 ..= 8 | slowest | best |
 /// | [`median`](Self::median) | object median | | 1 ..= 4 | fast | SAH-blind baseline |
+/// | [`hybrid`](Self::hybrid) | HLBVH (clusters of 32) + treelets of 7 | 16 (top) | 1 ..= 4 (SAH collapse) | slow on one core | within 3 to 5% of `quality` |
 ///
 /// Measured throughput and SAH cost of each are in the [module docs](super#measured).
 ///
@@ -61,6 +125,9 @@ pub enum MortonBits {
 /// `N > max_leaf_size` is always split; in between the cheaper option wins (SAH termination,
 /// for the SAH strategies and the median alike). LBVH does not evaluate the SAH: it splits down
 /// to `min_leaf_size`, or to `max_leaf_size` where the Morton codes of a range are all equal.
+/// HLBVH bottoms split as the LBVH does, then collapse bottom-up every subtree of at most
+/// `max_leaf_size` primitives whose leaf would cost no more (`C_I N A <= C_T A + children`). The
+/// top of an HLBVH splits down to single clusters; [`refine`](Self::refine) never changes leaves.
 ///
 /// ```
 /// use strahl::build::{BuildParams, Strategy};
@@ -94,7 +161,27 @@ pub struct BuildParams {
     /// needs only `ceil(log2 N)` more levels); [`BuildStats::forced_splits`](super::BuildStats)
     /// counts how often.
     pub max_depth: u32,
+    /// Largest cluster of [`Strategy::Hlbvh`]: a run of sorted Morton codes with more
+    /// primitives is cut where its highest differing bit changes (the LBVH split), so clusters
+    /// are runs of equal top bits, as many bits as it takes. In `1 ..=`
+    /// [`MAX_CLUSTER_SIZE`]; 1 makes the build binned SAH over single primitives. Smaller
+    /// clusters: more of the tree is SAH, slower. (Capped further where the depth bound needs
+    /// it: clusters of at most `2^(max_depth - 1 - ceil(log2 n))`.)
+    pub cluster_size: u32,
+    /// A pass over the finished tree ([`Refine::None`] in every preset but
+    /// [`hybrid`](Self::hybrid)).
+    pub refine: Refine,
 }
+
+/// Largest accepted [`BuildParams::cluster_size`].
+///
+/// ```
+/// use strahl::build::{BuildParams, MAX_CLUSTER_SIZE};
+/// let p = BuildParams { cluster_size: MAX_CLUSTER_SIZE, ..BuildParams::hybrid() };
+/// assert!(p.check().is_ok());
+/// assert!(BuildParams { cluster_size: MAX_CLUSTER_SIZE + 1, ..p }.check().is_err());
+/// ```
+pub const MAX_CLUSTER_SIZE: u32 = 1 << 16;
 
 /// Fewest bins per axis of the binned builder.
 pub const MIN_BINS: u32 = 4;
@@ -127,6 +214,8 @@ impl BuildParams {
             bin_axes: BinAxes::All,
             morton_bits: MortonBits::Bits30,
             max_depth: MAX_DEPTH,
+            cluster_size: 32,
+            refine: Refine::None,
         }
     }
 
@@ -169,6 +258,37 @@ impl BuildParams {
         }
     }
 
+    /// HLBVH with clusters of up to 32 primitives and a 16-bin SAH top, then one round of treelet
+    /// restructuring (7 leaves) at every node with 2 primitives or more: an SAH cost within 3%
+    /// (soup) to 5% (bunny) of [`quality`](Self::quality)'s. NOTE: single-threaded, the treelet
+    /// round costs about as much as a full-sweep build, so this preset is no faster than
+    /// `quality()` (measured in the [module docs](super#measured)); it is the starting point for
+    /// the refinement's knobs ([`TreeletParams`]).
+    ///
+    /// ```
+    /// use strahl::{build::{Bvh2, BuildParams, Strategy}, scene};
+    /// let bunny = scene::bunny();
+    /// let tris = bunny.as_indexed();
+    /// let p = BuildParams::hybrid();
+    /// assert_eq!(p.strategy, Strategy::Hlbvh);
+    /// let (bvh, stats) = Bvh2::build(&tris, &p).unwrap();
+    /// assert!(stats.restructured > 0);
+    /// assert!(bvh.validate(&tris).unwrap().max_depth <= p.max_depth);
+    /// let (lbvh, _) = Bvh2::build(&tris, &BuildParams::fastest()).unwrap();
+    /// assert!(bvh.sah_cost(1.0, 1.0) < lbvh.sah_cost(1.0, 1.0));
+    /// ```
+    pub const fn hybrid() -> Self {
+        Self {
+            strategy: Strategy::Hlbvh,
+            min_leaf_size: 1,
+            max_leaf_size: 4,
+            bins: 16,
+            bin_axes: BinAxes::All,
+            refine: Refine::Treelets(TreeletParams::new()),
+            ..Self::fastest()
+        }
+    }
+
     /// `Ok` if every field is in its documented range, else [`BuildError::InvalidParams`] naming
     /// the first field that is not. The builders call this first.
     pub fn check(&self) -> Result<(), BuildError> {
@@ -190,6 +310,20 @@ impl BuildParams {
         }
         if !(MIN_DEPTH..=MAX_DEPTH).contains(&self.max_depth) {
             return bad("max_depth must be in 34 ..= traverse::MAX_DEPTH");
+        }
+        if !(1..=MAX_CLUSTER_SIZE).contains(&self.cluster_size) {
+            return bad("cluster_size must be in 1 ..= 65536");
+        }
+        if let Refine::Treelets(t) = self.refine {
+            if !(3..=8).contains(&t.leaves) {
+                return bad("refine: treelet leaves must be in 3 ..= 8");
+            }
+            if t.min_prims == 0 {
+                return bad("refine: treelet min_prims must be >= 1");
+            }
+            if !(1..=16).contains(&t.rounds) {
+                return bad("refine: treelet rounds must be in 1 ..= 16");
+            }
         }
         Ok(())
     }

@@ -180,6 +180,15 @@ impl PrimRef {
         ]))
     }
 
+    /// A reference with box `b` (not empty) and index `index`.
+    #[inline]
+    pub fn from_box(b: Box8, index: u32) -> Self {
+        let mut a = b.0.to_array();
+        a[3] = f32::from_bits(index ^ INDEX_XOR);
+        a[7] = 0.0;
+        Self(f32x8::new(a))
+    }
+
     /// The primitive index.
     #[inline(always)]
     pub fn index(&self) -> u32 {

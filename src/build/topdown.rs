@@ -16,7 +16,7 @@ use alloc::vec::Vec;
 
 /// A node still to build: its slot, the range of references it covers (valid in `alt` or `refs`),
 /// its depth (root = 1), its box and the bounds of its doubled centroids.
-struct Task {
+pub(crate) struct Task {
     node: u32,
     begin: u32,
     end: u32,
@@ -53,6 +53,18 @@ pub(crate) fn split_cost(p: &BuildParams, sum: f32, area: f32, count: u32) -> f3
 /// Builds with the median or binned strategy.
 pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2) -> Counters {
     let Builder { refs, alt, .. } = b;
+    build_refs(refs, alt, info, p, out)
+}
+
+/// [`build`] over the references `refs` (reordered), with `alt` as the second buffer; `info`
+/// gives their joint box and centroid bounds.
+pub(crate) fn build_refs(
+    refs: &mut [PrimRef],
+    alt: &mut Vec<PrimRef>,
+    info: &PrepInfo,
+    p: &BuildParams,
+    out: &mut Bvh2,
+) -> Counters {
     let n = refs.len();
     // NOTE: resized only when the length changes; ranges are written before they are read.
     if alt.len() != n {
@@ -65,15 +77,46 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
     let mut c = Counters::default();
     // Left children are taken first, so the stack holds at most one right sibling per level.
     let mut stack: Vec<Task> = Vec::with_capacity(p.max_depth as usize + 1);
-    stack.push(Task {
-        node: 0,
-        begin: 0,
-        end: n as u32,
-        depth: 1,
-        in_alt: false,
-        bounds: info.bounds,
-        cb: info.cbounds,
-    });
+    let root = Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds);
+    subtree(refs, alt, p, out, root, &mut bins, &mut stack, &mut c);
+    c
+}
+
+impl Task {
+    /// The task of building node `node` (already in the array) over `refs[begin..end]` at
+    /// `depth`: `[node, begin, end, depth]`, with the range's box and centroid bounds.
+    pub(crate) fn new(task: [u32; 4], bounds: Box8, cb: CBounds) -> Self {
+        let [node, begin, end, depth] = task;
+        Self {
+            node,
+            begin,
+            end,
+            depth,
+            in_alt: false,
+            bounds,
+            cb,
+        }
+    }
+}
+
+/// Builds the subtree of task `root`, whose range is valid in `refs` (`alt` is the second buffer,
+/// as long), into `out` (whose primitive-index array covers the range); `bins` and `stack` are
+/// scratch.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn subtree(
+    refs: &mut [PrimRef],
+    alt: &mut [PrimRef],
+    p: &BuildParams,
+    out: &mut Bvh2,
+    root: Task,
+    bins: &mut Bins,
+    stack: &mut Vec<Task>,
+    c: &mut Counters,
+) {
+    let bins = &mut *bins;
+    let c = &mut *c;
+    stack.clear();
+    stack.push(root);
     while let Some(t) = stack.pop() {
         c.max_depth = c.max_depth.max(t.depth);
         let count = t.end - t.begin;
@@ -84,7 +127,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
             (&mut refs[range.clone()], &mut alt[range.clone()])
         };
         if count <= p.min_leaf_size {
-            make_leaf(out, &mut c, &t, src);
+            make_leaf(out, c, &t, src);
             continue;
         }
         let area = t.bounds.half_area_nonempty();
@@ -123,7 +166,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 let best = if binning.is_flat() {
                     None
                 } else {
-                    binned::find(src, &binning, nb as usize, p.bin_axes == BinAxes::Longest, &mut bins)
+                    binned::find(src, &binning, nb as usize, p.bin_axes == BinAxes::Longest, bins)
                 };
                 best.map(|s| {
                     if may_leaf && leaf_cost <= split_cost(p, s.cost, area, count) {
@@ -155,12 +198,12 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
         let split = match found {
             // A split that does not pay.
             Some(None) => {
-                make_leaf(out, &mut c, &t, src);
+                make_leaf(out, c, &t, src);
                 continue;
             }
             Some(Some(s)) => s,
             None if may_leaf => {
-                make_leaf(out, &mut c, &t, src);
+                make_leaf(out, c, &t, src);
                 continue;
             }
             None => {
@@ -208,7 +251,6 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
             cb: split.lcb,
         });
     }
-    c
 }
 
 /// Makes `t` a leaf over `refs` (its range, in the buffer that holds it).
