@@ -69,32 +69,49 @@ fn group<'a>(
     g
 }
 
+/// The same Marschner-Lobb field as `u8`, `u16` and `f32` voxels, each transfer function over
+/// the voxel type's range, scalar and x8 in one group (the ratio per voxel type from one run).
 fn x8_vs_scalar(c: &mut Criterion) {
-    let data = quantise(&marschner_lobb(N));
-    let vol = unit_volume(&data, N).unwrap();
+    let field = marschner_lobb(N);
+    let d8 = quantise(&field);
+    let d16: Vec<u16> = d8.iter().map(|&x| x as u16 * 257).collect();
+    let d32: Vec<f32> = d8.iter().map(|&x| x as f32).collect();
     let table = ramp(0, 255, 1.5);
-    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
-    let m = VolumeMedium::new(vol, tf);
     let rays = camera();
+    let mut g = group(c, "volume_x8_vs_scalar", rays.len());
+    x8_vs_scalar_one(&mut g, "u8", unit_volume(&d8, N).unwrap(), 255.0, &table, &rays);
+    x8_vs_scalar_one(&mut g, "u16", unit_volume(&d16, N).unwrap(), 65535.0, &table, &rays);
+    x8_vs_scalar_one(&mut g, "f32", unit_volume(&d32, N).unwrap(), 255.0, &table, &rays);
+    g.finish();
+}
+
+fn x8_vs_scalar_one<V: Voxel>(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    ty: &str,
+    vol: Volume<'_, V>,
+    hi: f32,
+    table: &[TfEntry],
+    rays: &[Ray],
+) {
+    let tf = TransferFunction::new(table, 0.0, hi).unwrap();
+    let m = VolumeMedium::new(vol, tf);
     let p = MarchParams::reference(vol.spacing().x * 0.5);
-    let (a, sa) = march(|r, o| integrate_scalar(&m, r, o, &p).unwrap(), &rays);
-    let (b, sb) = march(|r, o| integrate_x8(&m, r, o, &p).unwrap(), &rays);
-    assert!(identical(&a, &b), "x8 differs from scalar");
+    let (a, sa) = march(|r, o| integrate_scalar(&m, r, o, &p).unwrap(), rays);
+    let (b, sb) = march(|r, o| integrate_x8(&m, r, o, &p).unwrap(), rays);
+    assert!(identical(&a, &b), "x8 differs from scalar ({ty})");
     assert_eq!(sa, sb);
     println!(
-        "x8 vs scalar: {} rays, {:.0} samples per ray (dense Marschner-Lobb {N}^3 u8, step 1/2 voxel), images identical",
+        "x8 vs scalar ({ty}): {} rays, {:.0} samples per ray (dense Marschner-Lobb {N}^3, step 1/2 voxel), images identical",
         sa.rays,
         sa.samples as f64 / sa.rays as f64
     );
-    let mut g = group(c, "volume_x8_vs_scalar", rays.len());
     let mut out = vec![Rgba::ZERO; rays.len()];
-    g.bench_function("scalar", |bch| {
-        bch.iter(|| integrate_scalar(&m, black_box(&rays), &mut out, &p).unwrap())
+    g.bench_function(format!("{ty}/scalar"), |bch| {
+        bch.iter(|| integrate_scalar(&m, black_box(rays), &mut out, &p).unwrap())
     });
-    g.bench_function("x8", |bch| {
-        bch.iter(|| integrate_x8(&m, black_box(&rays), &mut out, &p).unwrap())
+    g.bench_function(format!("{ty}/x8"), |bch| {
+        bch.iter(|| integrate_x8(&m, black_box(rays), &mut out, &p).unwrap())
     });
-    g.finish();
 }
 
 fn skipping(c: &mut Criterion) {
