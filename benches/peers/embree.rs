@@ -486,3 +486,229 @@ pub fn build_bvh(device: &Device, boxes: &[Aabb], quality: Quality, max_leaf: u3
         out
     }
 }
+
+// ---- rtcBuildBVH, the whole tree kept: leaves remember their primitives, for conversion ----
+
+/// A leaf of a [`BuiltTree`]: `count` primitive ids follow the header in Embree's node memory.
+#[repr(C)]
+struct IdLeaf {
+    is_leaf: u32,
+    count: u32,
+    // `count` u32 primitive ids follow.
+}
+
+extern "C" fn create_id_leaf(
+    alloc: RTCThreadLocalAllocator,
+    prims: *const RTCBuildPrimitive,
+    count: usize,
+    _: *mut c_void,
+) -> *mut c_void {
+    let bytes = std::mem::size_of::<IdLeaf>() + count * std::mem::size_of::<u32>();
+    // SAFETY: Embree's allocator returns `bytes` bytes aligned to 16, owned by the BVH; Embree
+    // passes `count` valid build primitives.
+    unsafe {
+        let p = rtcThreadLocalAlloc(alloc, bytes, 16) as *mut IdLeaf;
+        p.write(IdLeaf {
+            is_leaf: 1,
+            count: count as u32,
+        });
+        let ids = p.add(1) as *mut u32;
+        for i in 0..count {
+            ids.add(i).write((*prims.add(i)).prim_id);
+        }
+        p as *mut c_void
+    }
+}
+
+fn to_aabb(b: &RTCBounds) -> Aabb {
+    Aabb::new(Vec3::from_array(b.lower), Vec3::from_array(b.upper))
+}
+
+/// Settings of one [`BuiltTree::build`] (`rtcBuildBVH`'s arguments that matter for quality).
+#[derive(Clone, Copy, Debug)]
+pub struct TreeSettings {
+    /// Build quality. `rtcBuildBVH` runs its Morton builder for `Low` and its binned SAH builder
+    /// for `Medium`; `High` means spatial splits, which need a split callback (none is given, as
+    /// a split primitive would sit in several leaves), so `High` runs the binned SAH builder too.
+    pub quality: Quality,
+    /// Largest leaf (at most 32, `RTC_BUILD_MAX_PRIMITIVES_PER_LEAF`).
+    pub max_leaf: u32,
+    /// `C_T`.
+    pub traversal_cost: f32,
+    /// `C_I`.
+    pub intersection_cost: f32,
+}
+
+/// A binary BVH built by `rtcBuildBVH` (branching factor 2, one thread), kept in Embree's node
+/// memory with each leaf's primitive ids, so that it can be walked with [`root`](Self::root) and
+/// [`node`](Self::node) and converted to another layout. Rebuilding the same `BuiltTree` reuses
+/// Embree's BVH object (and its node allocator) and the primitive array; the tree is released on
+/// drop.
+pub struct BuiltTree<'d> {
+    bvh: RTCBVH,
+    prims: Vec<RTCBuildPrimitive>,
+    root: *mut c_void,
+    bounds: Aabb,
+    _device: &'d Device,
+}
+
+/// A node of a [`BuiltTree`] (valid while the tree is neither rebuilt nor dropped).
+#[derive(Clone, Copy)]
+pub struct TreeNode<'t>(*const c_void, std::marker::PhantomData<&'t ()>);
+
+/// What a [`TreeNode`] is.
+pub enum TreeNodeKind<'t> {
+    /// A leaf and its primitive ids (indices into the boxes given to the build).
+    Leaf(&'t [u32]),
+    /// An interior node: its two children with their boxes.
+    Inner([(Aabb, TreeNode<'t>); 2]),
+}
+
+impl<'d> BuiltTree<'d> {
+    /// An empty tree on `device` (one `rtcNewBVH`).
+    pub fn new(device: &'d Device) -> Self {
+        // SAFETY: a live device; Embree returns null on failure (checked).
+        let bvh = unsafe { rtcNewBVH(device.0) };
+        assert!(!bvh.is_null(), "rtcNewBVH failed");
+        Self {
+            bvh,
+            prims: Vec::new(),
+            root: null_mut(),
+            bounds: Aabb::EMPTY,
+            _device: device,
+        }
+    }
+
+    /// (Re)builds the tree over `boxes` (all valid) with `s`; the previous tree is gone.
+    pub fn build(&mut self, boxes: &[Aabb], s: &TreeSettings) {
+        self.prims.clear();
+        let mut bounds = Aabb::EMPTY;
+        self.prims.extend(boxes.iter().enumerate().map(|(i, b)| {
+            bounds = bounds.union(b);
+            RTCBuildPrimitive {
+                lower: b.min.to_array(),
+                geom_id: 0,
+                upper: b.max.to_array(),
+                prim_id: i as u32,
+            }
+        }));
+        self.bounds = bounds;
+        let args = RTCBuildArguments {
+            byte_size: std::mem::size_of::<RTCBuildArguments>(),
+            build_quality: s.quality as c_uint,
+            build_flags: 0,
+            max_branching_factor: 2,
+            max_depth: 1024,
+            sah_block_size: 1,
+            min_leaf_size: 1,
+            max_leaf_size: s.max_leaf.clamp(1, 32),
+            traversal_cost: s.traversal_cost,
+            intersection_cost: s.intersection_cost,
+            bvh: self.bvh,
+            primitives: self.prims.as_mut_ptr(),
+            primitive_count: self.prims.len(),
+            primitive_array_capacity: self.prims.len(),
+            create_node: Some(create_node),
+            set_node_children: Some(set_children),
+            set_node_bounds: Some(set_bounds),
+            create_leaf: Some(create_id_leaf),
+            split_primitive: null(),
+            build_progress: null(),
+            user_ptr: null_mut(),
+        };
+        // SAFETY: `prims` lives (unmoved) for the whole call; the callbacks only write memory
+        // from Embree's allocator, which the BVH object owns until the next build or release.
+        self.root = if self.prims.is_empty() {
+            null_mut()
+        } else {
+            unsafe { rtcBuildBVH(&args) }
+        };
+    }
+
+    /// The root and the box of all primitives, `None` for an empty tree (or a failed build).
+    pub fn root(&self) -> Option<(Aabb, TreeNode<'_>)> {
+        (!self.root.is_null()).then_some((self.bounds, TreeNode(self.root, std::marker::PhantomData)))
+    }
+
+    /// What node `n` of this tree is.
+    pub fn node<'t>(&'t self, n: TreeNode<'t>) -> TreeNodeKind<'t> {
+        // SAFETY: `n` came from this tree (the lifetime ties it to `&self`, so the tree has not
+        // been rebuilt); every node starts with its `is_leaf` word, written by our callbacks.
+        unsafe {
+            if *(n.0 as *const u32) == 1 {
+                let leaf = n.0 as *const IdLeaf;
+                let ids = leaf.add(1) as *const u32;
+                TreeNodeKind::Leaf(std::slice::from_raw_parts(ids, (*leaf).count as usize))
+            } else {
+                let inner = &*(n.0 as *const Inner);
+                TreeNodeKind::Inner([0, 1].map(|i| {
+                    (
+                        to_aabb(&inner.bounds[i]),
+                        TreeNode(inner.children[i], std::marker::PhantomData),
+                    )
+                }))
+            }
+        }
+    }
+}
+
+impl Drop for BuiltTree<'_> {
+    fn drop(&mut self) {
+        // SAFETY: created by rtcNewBVH, released once; no TreeNode outlives `self`.
+        unsafe { rtcReleaseBVH(self.bvh) }
+    }
+}
+
+// ---- rtcIntersect16: sixteen rays as one packet (for benches/packet.rs) ----
+
+#[repr(C, align(64))]
+struct RTCRayHit16 {
+    org_x: [f32; 16],
+    org_y: [f32; 16],
+    org_z: [f32; 16],
+    tnear: [f32; 16],
+    dir_x: [f32; 16],
+    dir_y: [f32; 16],
+    dir_z: [f32; 16],
+    time: [f32; 16],
+    tfar: [f32; 16],
+    mask: [c_uint; 16],
+    id: [c_uint; 16],
+    flags: [c_uint; 16],
+    ng_x: [f32; 16],
+    ng_y: [f32; 16],
+    ng_z: [f32; 16],
+    u: [f32; 16],
+    v: [f32; 16],
+    prim_id: [c_uint; 16],
+    geom_id: [c_uint; 16],
+    inst_id: [c_uint; 16],
+}
+
+#[link(name = "embree3")]
+unsafe extern "C" {
+    fn rtcIntersect16(valid: *const i32, scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit16);
+}
+
+impl Scene<'_> {
+    /// Sixteen rays as one packet: `(t, primitive)` per lane.
+    pub fn intersect16(&self, rays: &[Ray]) -> [Option<(f32, u32)>; 16] {
+        let mut valid = [0i32; 16];
+        // SAFETY: an all-zero RTCRayHit16 is a valid value (plain floats and integers).
+        let mut rh: RTCRayHit16 = unsafe { std::mem::zeroed() };
+        for (i, r) in rays.iter().take(16).enumerate() {
+            valid[i] = -1;
+            [rh.org_x[i], rh.org_y[i], rh.org_z[i]] = r.origin.to_array();
+            [rh.dir_x[i], rh.dir_y[i], rh.dir_z[i]] = r.direction.to_array();
+            rh.tnear[i] = r.tmin;
+            rh.tfar[i] = r.tmax;
+            rh.mask[i] = u32::MAX;
+            rh.geom_id[i] = RTC_INVALID_GEOMETRY_ID;
+        }
+        let mut ctx = context();
+        ctx.flags = 1; // coherent
+        // SAFETY: `valid` has 16 ints, `rh` is 64-byte aligned and initialised.
+        unsafe { rtcIntersect16(valid.as_ptr(), self.scene, &mut ctx, &mut rh) };
+        std::array::from_fn(|i| (rh.geom_id[i] != RTC_INVALID_GEOMETRY_ID).then_some((rh.tfar[i], rh.prim_id[i])))
+    }
+}

@@ -1,8 +1,11 @@
-//! Ray packets in structure-of-arrays form for the packet kernels (N rays, one primitive).
+//! Ray packets in structure-of-arrays form for the packet kernels (N rays, one primitive): 4 rays
+//! in [`f32x4`], 8 in [`f32x8`], 16 in `wide`'s `f32x16` (one AVX-512 register, or two `f32x8`
+//! halves without AVX-512).
 
 use super::{HitLanes, PreparedRay};
 use crate::geometry::Ray;
 use crate::math::{Lane, f32x4, f32x8};
+use wide::f32x16;
 
 /// `N` prepared rays in SoA form: lane `i` holds exactly what [`PreparedRay::new`] computes for ray
 /// `i`, so packet kernels agree with the single-ray kernels lane by lane.
@@ -42,9 +45,17 @@ pub type PreparedPacket4 = PreparedPacket<f32x4, 4>;
 pub type PreparedPacket8 = PreparedPacket<f32x8, 8>;
 
 impl<L: Lane, const N: usize> PreparedPacket<L, N> {
+    const _LANES_MATCH: () = assert!(L::N == N);
+
     /// Prepares up to `N` rays (extra rays are ignored).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::PreparedPacket, traverse::packet::f32x16};
+    /// let rays = [Ray::new(Vec3::ZERO, Vec3::X); 11];
+    /// assert_eq!(PreparedPacket::<f32x16, 16>::new(&rays).active(), 0x7ff);
+    /// ```
     pub fn new(rays: &[Ray]) -> Self {
-        let mut pre = [PreparedRay::EMPTY; 8];
+        let mut pre = [PreparedRay::EMPTY; N];
         for (p, r) in pre.iter_mut().zip(rays.iter().take(N)) {
             *p = PreparedRay::new(r);
         }
@@ -53,15 +64,16 @@ impl<L: Lane, const N: usize> PreparedPacket<L, N> {
 
     /// Transposes up to `N` prepared rays; missing lanes are [`PreparedRay::EMPTY`].
     pub fn from_prepared(rays: &[PreparedRay]) -> Self {
+        let () = Self::_LANES_MATCH;
         // PERF: plain loops into arrays (closures through `dyn Fn` cost about a third of a
         // coherent packet's traversal time on primary rays).
-        let mut o = [[0f32; 8]; 3];
-        let mut d = [[0f32; 8]; 3];
-        let mut inv = [[0f32; 8]; 3];
-        let mut sh = [[0f32; 8]; 3];
-        let mut ksel = [[[0f32; 8]; 3]; 3];
-        let mut tmin = [0f32; 8];
-        let mut tmax = [0f32; 8];
+        let mut o = [[0f32; N]; 3];
+        let mut d = [[0f32; N]; 3];
+        let mut inv = [[0f32; N]; 3];
+        let mut sh = [[0f32; N]; 3];
+        let mut ksel = [[[0f32; N]; 3]; 3];
+        let mut tmin = [0f32; N];
+        let mut tmax = [0f32; N];
         let all = f32::from_bits(u32::MAX);
         for i in 0..N {
             let r = rays.get(i).unwrap_or(&PreparedRay::EMPTY);
@@ -77,7 +89,7 @@ impl<L: Lane, const N: usize> PreparedPacket<L, N> {
             tmin[i] = r.tmin;
             tmax[i] = r.tmax;
         }
-        let load3 = |v: &[[f32; 8]; 3]| [L::load(&v[0]), L::load(&v[1]), L::load(&v[2])];
+        let load3 = |v: &[[f32; N]; 3]| [L::load(&v[0]), L::load(&v[1]), L::load(&v[2])];
         // Inactive lanes never hit, so their permutation does not matter.
         let mut ks = rays.iter().take(N).filter(|r| r.tmin < r.tmax).map(|r| r.k);
         let first = ks.next().unwrap_or([0, 1, 2]);
@@ -132,4 +144,128 @@ pub(crate) fn commit<L: Lane, const N: usize>(
         m &= m - 1;
     }
     mask
+}
+
+// NOTE: `math/lanes.rs` holds the `Lane` impls of `f32x4` and `f32x8`; this one is here so that the
+// 16-ray packets could land without touching `math` (move it beside the others). Every operation
+// is the same one `impl_lane!` uses there, on `wide`'s `f32x16` (one AVX-512 register, or two
+// `f32x8` halves), so the NaN policy and the min/max semantics are the same.
+impl Lane for f32x16 {
+    const N: usize = 16;
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        f32x16::splat(v)
+    }
+    #[inline(always)]
+    fn load(s: &[f32]) -> Self {
+        let mut a = [0.0f32; 16];
+        a.copy_from_slice(&s[..16]);
+        f32x16::new(a)
+    }
+    #[inline(always)]
+    fn store(self, out: &mut [f32]) {
+        out[..16].copy_from_slice(&self.to_array());
+    }
+    #[inline(always)]
+    fn lane(self, i: usize) -> f32 {
+        self.to_array()[i]
+    }
+    #[inline(always)]
+    fn max_l(self, rhs: Self) -> Self {
+        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+        {
+            self.fast_max(rhs)
+        }
+        #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+        {
+            f32x16::select(self.simd_gt(rhs), self, rhs)
+        }
+    }
+    #[inline(always)]
+    fn min_l(self, rhs: Self) -> Self {
+        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+        {
+            self.fast_min(rhs)
+        }
+        #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+        {
+            f32x16::select(self.simd_lt(rhs), self, rhs)
+        }
+    }
+    #[inline(always)]
+    fn gt(self, rhs: Self) -> Self {
+        self.simd_gt(rhs)
+    }
+    #[inline(always)]
+    fn ge(self, rhs: Self) -> Self {
+        self.simd_ge(rhs)
+    }
+    #[inline(always)]
+    fn lt(self, rhs: Self) -> Self {
+        self.simd_lt(rhs)
+    }
+    #[inline(always)]
+    fn le(self, rhs: Self) -> Self {
+        self.simd_le(rhs)
+    }
+    #[inline(always)]
+    fn eq(self, rhs: Self) -> Self {
+        self.simd_eq(rhs)
+    }
+    #[inline(always)]
+    fn ne(self, rhs: Self) -> Self {
+        self.simd_ne(rhs)
+    }
+    #[inline(always)]
+    fn select(self, a: Self, b: Self) -> Self {
+        f32x16::select::<f32x16>(self, a, b)
+    }
+    #[inline(always)]
+    fn bitmask(self) -> u32 {
+        self.to_bitmask()
+    }
+    #[inline(always)]
+    fn xor_sign(self, sign: Self) -> Self {
+        self ^ (sign & f32x16::splat(-0.0))
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        f32x16::abs(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{max_l, min_l};
+
+    /// The same table as `math::lanes`' test, for the 16-lane type.
+    #[test]
+    fn f32x16_matches_scalar_semantics() {
+        const SPECIALS: [f32; 8] = [0.0, -0.0, 1.0, -1.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e-40];
+        for &a in &SPECIALS {
+            for &b in &SPECIALS {
+                let (la, lb) = (f32x16::splat(a), f32x16::splat(b));
+                for i in 0..16 {
+                    assert_eq!(la.max_l(lb).lane(i).to_bits(), max_l(a, b).to_bits(), "max {a} {b}");
+                    assert_eq!(la.min_l(lb).lane(i).to_bits(), min_l(a, b).to_bits(), "min {a} {b}");
+                    assert_eq!(la.gt(lb).bitmask() >> i & 1 == 1, a > b);
+                    assert_eq!(la.ge(lb).bitmask() >> i & 1 == 1, a >= b);
+                    assert_eq!(la.lt(lb).bitmask() >> i & 1 == 1, a < b);
+                    assert_eq!(la.le(lb).bitmask() >> i & 1 == 1, a <= b);
+                    assert_eq!(la.eq(lb).bitmask() >> i & 1 == 1, a == b);
+                    assert_eq!(la.ne(lb).bitmask() >> i & 1 == 1, a != b);
+                }
+                let m = f32x16::new(core::array::from_fn(
+                    |i| if i % 3 == 0 { f32::from_bits(!0) } else { 0.0 },
+                ));
+                let s = m.select(la, lb);
+                for i in 0..16 {
+                    let want = if i % 3 == 0 { a } else { b };
+                    assert_eq!(s.lane(i).to_bits(), want.to_bits());
+                }
+                assert_eq!(m.bitmask(), 0b1001_0010_0100_1001);
+            }
+        }
+    }
 }

@@ -1,0 +1,133 @@
+//! Leaf tests of a packet: the packet triangle kernels restricted to the lanes that entered a leaf.
+//!
+//! Up to 8 lanes run the kernels on the packet itself. 16 lanes run them as two 8-lane halves,
+//! skipping a half without a lane in the leaf: the kernels' own scratch (the watertight edge
+//! fallback) holds 8 lanes, and half packets share more work on incoherent leaves. Boxes are still
+//! tested 16 lanes at a time.
+
+use super::wide::lane_mask;
+use crate::geometry::{Hit, Triangle};
+use crate::intersect::{HitLanes, PreparedPacket, PreparedPacket8, PreparedRay};
+use crate::math::{Lane, f32x8};
+use crate::traverse::TriangleTest;
+
+/// One 8-lane half of a 16-ray packet.
+struct Half {
+    p: PreparedPacket8,
+    hits: HitLanes<f32x8, 8>,
+}
+
+/// The leaf-test state of a packet of `K` rays in lanes `R`.
+pub(super) struct Leaves<R, const K: usize> {
+    hits: HitLanes<R, K>,
+    halves: Option<[Half; 2]>,
+    /// The packet's `tmax` before [`begin`](Self::begin) (lanes outside the leaf get it back).
+    keep: R,
+    /// The lanes in the leaf, as a lane mask.
+    inside: R,
+    /// The lanes in the leaf, as bits.
+    mask: u32,
+}
+
+impl<R: Lane, const K: usize> Leaves<R, K> {
+    /// Leaf state for the prepared rays `single` (the lanes of the packet).
+    #[inline(always)]
+    pub(super) fn new(single: &[PreparedRay; K]) -> Self {
+        let halves = (K > 8).then(|| {
+            let half = |s: &[PreparedRay]| Half {
+                p: PreparedPacket8::from_prepared(s),
+                hits: HitLanes::default(),
+            };
+            [half(&single[..8]), half(&single[8..])]
+        });
+        Self {
+            hits: HitLanes::default(),
+            halves,
+            keep: R::splat(0.0),
+            inside: R::splat(0.0),
+            mask: 0,
+        }
+    }
+
+    /// Starts a leaf entered by the lanes of `mask`: the others are masked off until
+    /// [`end`](Self::end).
+    #[inline(always)]
+    pub(super) fn begin(&mut self, packet: &mut PreparedPacket<R, K>, mask: u32) {
+        self.mask = mask;
+        match &mut self.halves {
+            None => {
+                self.keep = packet.tmax;
+                self.inside = lane_mask::<R, K>(mask);
+                packet.tmax = self.inside.select(packet.tmax, R::splat(f32::NEG_INFINITY));
+            }
+            Some(halves) => {
+                let mut t = [0f32; K];
+                packet.tmax.store(&mut t);
+                for (h, half) in halves.iter_mut().enumerate() {
+                    let m = mask >> (8 * h) & 0xff;
+                    if m != 0 {
+                        let tmax = f32x8::load(&t[8 * h..]);
+                        half.p.tmax = lane_mask::<f32x8, 8>(m).select(tmax, f32x8::splat(f32::NEG_INFINITY));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Tests one triangle against the lanes in the leaf; returns the lanes hit closer than their
+    /// `tmax` (which shrinks to the hit).
+    #[inline(always)]
+    pub(super) fn test<T: TriangleTest>(
+        &mut self,
+        packet: &mut PreparedPacket<R, K>,
+        tri: &Triangle,
+        prim: u32,
+    ) -> u32 {
+        match &mut self.halves {
+            None => T::intersect_packet(packet, tri, prim, &mut self.hits),
+            Some(halves) => {
+                let mut hit = 0;
+                for (h, half) in halves.iter_mut().enumerate() {
+                    if self.mask >> (8 * h) & 0xff != 0 {
+                        hit |= T::intersect_packet(&mut half.p, tri, prim, &mut half.hits) << (8 * h);
+                    }
+                }
+                hit
+            }
+        }
+    }
+
+    /// Ends the leaf: every lane's `tmax` is its closest hit so far again.
+    #[inline(always)]
+    pub(super) fn end(&mut self, packet: &mut PreparedPacket<R, K>) {
+        match &self.halves {
+            None => packet.tmax = self.inside.select(packet.tmax, self.keep),
+            Some(halves) => {
+                let mut t = [0f32; K];
+                packet.tmax.store(&mut t);
+                for (h, half) in halves.iter().enumerate() {
+                    let mut m = self.mask >> (8 * h) & 0xff;
+                    if m != 0 {
+                        let mut ht = [0f32; 8];
+                        half.p.tmax.store(&mut ht);
+                        while m != 0 {
+                            let i = m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            t[8 * h + i] = ht[i];
+                        }
+                    }
+                }
+                packet.tmax = R::load(&t);
+            }
+        }
+    }
+
+    /// The last hit recorded for lane `i`.
+    #[inline(always)]
+    pub(super) fn get(&self, i: usize) -> Hit {
+        match &self.halves {
+            None => self.hits.get(i),
+            Some(halves) => halves[(i / 8) % 2].hits.get(i % 8),
+        }
+    }
+}

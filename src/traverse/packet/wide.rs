@@ -1,0 +1,701 @@
+//! Packet walks of wide BVHs, generic over the ray lanes `R` (`K = R::N` rays): the masked walk
+//! with the single-ray hybrid, and the interval walk of coherent packets.
+
+use super::leaf::Leaves;
+use super::stack::{Entry, MaskStack};
+use crate::geometry::{Hit, Ray};
+use crate::intersect::aabb::FAR_SLACK;
+use crate::intersect::aabb::intersect_aabb_lanes;
+use crate::intersect::{PreparedPacket, PreparedRay};
+use crate::layout::{BvhWideRef, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs};
+use crate::math::Lane;
+use crate::traverse::TriangleTest;
+use crate::traverse::stack::Stack;
+use crate::traverse::wide::intersect_from;
+
+/// Stack entries: enough for `MAX_WIDE_DEPTH` levels of 8-wide nodes.
+const STACK: usize = MAX_WIDE_DEPTH as usize * 7 + 1;
+
+/// All bits set in the lanes of `bits`, zero elsewhere.
+#[inline(always)]
+pub(super) fn lane_mask<R: Lane, const K: usize>(bits: u32) -> R {
+    let mut m = [0f32; K];
+    for (i, x) in m.iter_mut().enumerate() {
+        if bits >> i & 1 == 1 {
+            *x = f32::from_bits(u32::MAX);
+        }
+    }
+    R::load(&m)
+}
+
+/// `-0.0` in the lanes whose direction has its sign bit set on each axis, `+0.0` elsewhere.
+#[inline(always)]
+pub(super) fn sign_lanes<R: Lane, const K: usize>(single: &[PreparedRay; K]) -> [R; 3] {
+    let mut s = [[0f32; K]; 3];
+    for (i, r) in single.iter().enumerate() {
+        for (axis, &neg) in s.iter_mut().zip(&r.neg) {
+            if neg {
+                axis[i] = -0.0;
+            }
+        }
+    }
+    [R::load(&s[0]), R::load(&s[1]), R::load(&s[2])]
+}
+
+/// The slab test of one box against the `K` rays, lane by lane equal to the single-ray test
+/// ([`intersect_aabb_scalar`](crate::intersect::intersect_aabb_scalar)): near and far planes by
+/// each lane's sign bits, the same reduction order, the same conservative far bound.
+#[inline(always)]
+pub(super) fn box_lanes<R: Lane, const K: usize>(
+    p: &PreparedPacket<R, K>,
+    neg: &[R; 3],
+    lo: [f32; 3],
+    hi: [f32; 3],
+) -> (R, u32) {
+    let mut near = p.tmin;
+    let mut far = p.tmax;
+    for a in (0..3).rev() {
+        let (l, h) = (R::splat(lo[a]), R::splat(hi[a]));
+        let (n, f) = (neg[a].select(h, l), neg[a].select(l, h));
+        near = ((n - p.origin[a]) * p.inv_dir[a]).max_l(near);
+        far = ((f - p.origin[a]) * p.inv_dir[a]).min_l(far);
+    }
+    let hit = near.le(far + far.abs() * R::splat(FAR_SLACK));
+    (near, hit.bitmask())
+}
+
+/// The nearest entry distance over the lanes of `mask`.
+#[inline(always)]
+pub(super) fn hit_min<R: Lane, const K: usize>(near: R, mask: u32) -> f32 {
+    let mut n = [0f32; K];
+    near.store(&mut n);
+    let mut d = f32::INFINITY;
+    for (i, &x) in n.iter().enumerate() {
+        if mask >> i & 1 == 1 && x < d {
+            d = x;
+        }
+    }
+    d
+}
+
+/// Lanes that can still hit a box entered no earlier than `dist`: `dist <= tmax + |tmax| FAR_SLACK`.
+/// A lane outside this mask fails the slab test with its current `tmax` (its own entry is at least
+/// `dist`), so dropping it changes no answer.
+#[inline(always)]
+pub(super) fn open_lanes<R: Lane>(tmax: R, dist: f32) -> u32 {
+    R::splat(dist).le(tmax + tmax.abs() * R::splat(FAR_SLACK)).bitmask()
+}
+
+/// Copies the packet lanes' `tmax` into the single rays after leaf hits.
+#[inline(always)]
+fn sync_tmax<R: Lane, const K: usize>(packet: &PreparedPacket<R, K>, single: &mut [PreparedRay; K]) {
+    let mut t = [0f32; K];
+    packet.tmax.store(&mut t);
+    for (s, t) in single.iter_mut().zip(t) {
+        s.tmax = t;
+    }
+}
+
+/// `true` if the active lanes are coherent enough for interval culling (see the
+/// [module docs](super#wide-bvhs)): the same direction signs, directions within
+/// [`COHERENT_MIN_COS`](super::COHERENT_MIN_COS) of the first lane's, and origins within
+/// [`COHERENT_MAX_ORIGIN_SPREAD`](super::COHERENT_MAX_ORIGIN_SPREAD) of the tree's extent. The
+/// interval walk is exact for any packet, but it visits the union of the lanes' paths: for rays
+/// from scattered origins (diffuse bounces) that is most of the tree.
+#[inline(always)]
+pub(super) fn coherent<L: Lane, const N: usize, const K: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    single: &[PreparedRay; K],
+    active: u32,
+) -> bool {
+    let first = &single[active.trailing_zeros() as usize % K];
+    let d0 = first.direction.normalize_or_zero();
+    let (mut lo, mut hi) = (first.origin, first.origin);
+    for (i, r) in single.iter().enumerate() {
+        if active >> i & 1 == 0 {
+            continue;
+        }
+        if r.neg != first.neg || r.direction.normalize_or_zero().dot(d0) < super::COHERENT_MIN_COS {
+            return false;
+        }
+        (lo, hi) = (lo.min(r.origin), hi.max(r.origin));
+    }
+    if lo == hi {
+        return true; // one origin (a camera)
+    }
+    // The tree's extent: the root's child boxes (empty slots have empty boxes).
+    let Some(root) = bvh.nodes.first() else {
+        return false;
+    };
+    let mut extent = 0f32;
+    for a in 0..3 {
+        let (mut mn, mut mx) = ([0f32; N], [0f32; N]);
+        root.bounds.min[a].store(&mut mn);
+        root.bounds.max[a].store(&mut mx);
+        let (mn, mx) = (
+            mn.iter().fold(f32::INFINITY, |m, &x| m.min(x)),
+            mx.iter().fold(f32::NEG_INFINITY, |m, &x| m.max(x)),
+        );
+        extent = extent.max(mx - mn);
+    }
+    (hi - lo).max_element() <= extent * super::COHERENT_MAX_ORIGIN_SPREAD
+}
+
+/// Prepares up to `K` rays; lanes past `rays` are [`PreparedRay::EMPTY`].
+#[inline(always)]
+pub(super) fn prepare<const K: usize>(rays: &[Ray]) -> [PreparedRay; K] {
+    let mut single = [PreparedRay::EMPTY; K];
+    for (s, r) in single.iter_mut().zip(rays) {
+        *s = PreparedRay::new(r);
+    }
+    single
+}
+
+/// The lanes whose interval `[tmin, tmax)` is not empty.
+#[inline(always)]
+fn active_of<const K: usize>(single: &[PreparedRay; K]) -> u32 {
+    single
+        .iter()
+        .enumerate()
+        .fold(0, |m, (i, r)| m | ((r.tmin < r.tmax) as u32) << i)
+}
+
+/// Closest hits of up to `K` rays (see [`intersect_packet`](super::intersect_packet)).
+pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    hits: &mut [Option<Hit>],
+    switch: u32,
+) {
+    let n = rays.len().min(hits.len()).min(K);
+    let mut single = prepare::<K>(&rays[..n]);
+    let mut best: [Option<Hit>; K] = [None; K];
+    let active = active_of(&single);
+    if active != 0 && !bvh.nodes.is_empty() {
+        let coherent = coherent(bvh, &single, active);
+        if !coherent && active.count_ones() < switch {
+            // Hybrid at the root: single rays, without building the packet.
+            let mut m = active;
+            while m != 0 {
+                let i = m.trailing_zeros() as usize;
+                m &= m - 1;
+                best[i] = intersect_from::<T, L, N>(bvh, 0, &mut single[i]);
+            }
+        } else {
+            let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
+            let mut lanes = Leaves::<R, K>::new(&single);
+            let neg = sign_lanes::<R, K>(&single);
+            if coherent {
+                walk_interval::<T, L, N, R, K, false>(
+                    bvh,
+                    &mut packet,
+                    &neg,
+                    &mut single,
+                    &mut lanes,
+                    &mut best,
+                    active,
+                );
+            } else {
+                let mut w = Walk {
+                    packet: &mut packet,
+                    neg: &neg,
+                    single: &mut single,
+                    lanes: &mut lanes,
+                    best: &mut best,
+                };
+                w.run::<T, L, N, false>(bvh, active, switch);
+            }
+        }
+    }
+    for (h, b) in hits[..n].iter_mut().zip(best) {
+        *h = b;
+    }
+}
+
+/// Any-hit answers of up to `K` rays (see [`occluded_packet`](super::occluded_packet)).
+pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    occluded: &mut [bool],
+    switch: u32,
+) {
+    let n = rays.len().min(occluded.len()).min(K);
+    let mut single = prepare::<K>(&rays[..n]);
+    let active = active_of(&single);
+    let mut mask = 0u32;
+    if active != 0 && !bvh.nodes.is_empty() {
+        let coherent = coherent(bvh, &single, active);
+        if !coherent && active.count_ones() < switch {
+            let mut m = active;
+            while m != 0 {
+                let i = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if occluded_from::<T, L, N>(bvh, 0, &single[i]) {
+                    mask |= 1 << i;
+                }
+            }
+        } else {
+            let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
+            let mut lanes = Leaves::<R, K>::new(&single);
+            let mut best = [None; K];
+            let neg = sign_lanes::<R, K>(&single);
+            if coherent {
+                mask = walk_interval::<T, L, N, R, K, true>(
+                    bvh,
+                    &mut packet,
+                    &neg,
+                    &mut single,
+                    &mut lanes,
+                    &mut best,
+                    active,
+                );
+            } else {
+                let mut w = Walk {
+                    packet: &mut packet,
+                    neg: &neg,
+                    single: &mut single,
+                    lanes: &mut lanes,
+                    best: &mut best,
+                };
+                mask = w.run::<T, L, N, true>(bvh, active, switch);
+            }
+        }
+    }
+    for (i, o) in occluded[..n].iter_mut().enumerate() {
+        *o = mask >> i & 1 == 1;
+    }
+}
+
+/// Any hit of the prepared ray `r` in the subtree below child code `start` (`0`: the whole
+/// tree), for the hybrid's single rays; the same loop as
+/// [`wide::occluded_prepared`](crate::traverse::wide::occluded_prepared).
+fn occluded_from<T: TriangleTest, L: Lane, const N: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    start: u32,
+    r: &PreparedRay,
+) -> bool {
+    if start == 0 {
+        return crate::traverse::wide::occluded_prepared::<T, L, N>(bvh, r);
+    }
+    if r.is_empty() {
+        return false;
+    }
+    let mut stack = Stack::<STACK>::new();
+    let mut cur = start;
+    let mut budget = bvh.nodes.len();
+    let scan = |r: &PreparedRay| bvh.packs.iter().any(|p| T::hit_mask_lanes(r, p) != 0);
+    loop {
+        if cur & LEAF_BIT == 0 {
+            if budget == 0 {
+                return scan(r);
+            }
+            budget -= 1;
+            if let Some(node) = bvh.nodes.get(cur as usize) {
+                let (near, mut mask) = intersect_aabb_lanes(r, &node.bounds);
+                if mask != 0 {
+                    if mask & (mask - 1) == 0 {
+                        cur = node.child[mask.trailing_zeros() as usize];
+                        continue;
+                    }
+                    let mut nears = [0f32; N];
+                    near.store(&mut nears);
+                    let base = stack.len();
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        if !stack.push_sorted(base, node.child[i], nears[i]) {
+                            return scan(r);
+                        }
+                    }
+                }
+            }
+        } else if cur != EMPTY_CHILD {
+            let (first, count) = leaf_packs(cur);
+            if let Some(packs) = bvh.packs.get(first..first + count)
+                && packs.iter().any(|p| T::hit_mask_lanes(r, p) != 0)
+            {
+                return true;
+            }
+        }
+        match stack.pop() {
+            None => return false,
+            Some((code, _)) => cur = code,
+        }
+    }
+}
+
+/// The state of one masked walk: the packet, its sign lanes, the same rays as single rays (for the
+/// hybrid), the leaf kernels' hit lanes and the closest hits so far.
+struct Walk<'a, R, const K: usize> {
+    packet: &'a mut PreparedPacket<R, K>,
+    neg: &'a [R; 3],
+    single: &'a mut [PreparedRay; K],
+    lanes: &'a mut Leaves<R, K>,
+    best: &'a mut [Option<Hit>; K],
+}
+
+impl<R: Lane, const K: usize> Walk<'_, R, K> {
+    /// Finishes the lanes of `mask` below `code` as single rays; returns the lanes found occluded
+    /// (`ANY`) or 0.
+    #[inline(never)]
+    fn singles<T: TriangleTest, L: Lane, const N: usize, const ANY: bool>(
+        &mut self,
+        bvh: BvhWideRef<'_, L, N>,
+        code: u32,
+        mut mask: u32,
+    ) -> u32 {
+        let mut occluded = 0;
+        while mask != 0 {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if ANY {
+                if occluded_from::<T, L, N>(bvh, code, &self.single[i]) {
+                    occluded |= 1 << i;
+                }
+            } else if let Some(h) = intersect_from::<T, L, N>(bvh, code, &mut self.single[i]) {
+                self.best[i] = Some(h);
+            }
+        }
+        if !ANY {
+            let t: [f32; K] = core::array::from_fn(|i| self.single[i].tmax);
+            self.packet.tmax = R::load(&t);
+        }
+        occluded
+    }
+
+    /// Walks the tree with per-lane masks; where fewer than `switch` lanes enter a node they finish
+    /// its subtree as single rays. Returns the occluded lanes (`ANY`) or 0.
+    fn run<T: TriangleTest, L: Lane, const N: usize, const ANY: bool>(
+        &mut self,
+        bvh: BvhWideRef<'_, L, N>,
+        mut active: u32,
+        switch: u32,
+    ) -> u32 {
+        let mut occluded = 0u32;
+        let mut stack = MaskStack::<STACK>::new();
+        let mut cur = Entry {
+            code: 0,
+            dist: f32::NEG_INFINITY,
+            mask: active,
+        };
+        // A valid tree visits each node and leaf at most once per packet.
+        let mut budget = bvh.nodes.len().saturating_mul(N + 1).saturating_add(1);
+        loop {
+            let Entry { code, mask, .. } = cur;
+            if budget == 0 {
+                // Only a malformed view (a cycle) or a stack overflow gets here: finish every
+                // lane still active as a single ray from the root (exact for a valid tree).
+                return occluded | self.singles::<T, L, N, ANY>(bvh, 0, active);
+            }
+            budget -= 1;
+            if mask.count_ones() < switch {
+                // Hybrid: the few rays left finish this subtree alone.
+                let hit = self.singles::<T, L, N, ANY>(bvh, code, mask);
+                if ANY && hit != 0 {
+                    occluded |= hit;
+                    active &= !hit;
+                    if active == 0 {
+                        return occluded;
+                    }
+                    self.retire(active);
+                }
+            } else if code & LEAF_BIT == 0 {
+                if let Some(node) = bvh.nodes.get(code as usize) {
+                    let mut lo = [[0f32; N]; 3];
+                    let mut hi = [[0f32; N]; 3];
+                    for a in 0..3 {
+                        node.bounds.min[a].store(&mut lo[a]);
+                        node.bounds.max[a].store(&mut hi[a]);
+                    }
+                    let base = stack.len();
+                    for (c, &child) in node.child.iter().enumerate() {
+                        if child == EMPTY_CHILD {
+                            continue;
+                        }
+                        let (near, hit) = box_lanes(
+                            self.packet,
+                            self.neg,
+                            [lo[0][c], lo[1][c], lo[2][c]],
+                            [hi[0][c], hi[1][c], hi[2][c]],
+                        );
+                        let hit = hit & mask;
+                        if hit != 0 {
+                            // Order children by the nearest entry of any lane.
+                            let e = Entry {
+                                code: child,
+                                dist: hit_min::<R, K>(near, hit),
+                                mask: hit,
+                            };
+                            if !stack.push_sorted(base, e) {
+                                budget = 0; // NOTE: unreachable within MAX_WIDE_DEPTH
+                                break;
+                            }
+                        }
+                    }
+                }
+            } else if code != EMPTY_CHILD {
+                let hit = self.leaf::<T, L, N>(bvh, code, mask);
+                if hit != 0 {
+                    if ANY {
+                        // Any hit: retire the lanes hit; stop when none is left.
+                        occluded |= hit;
+                        active &= !hit;
+                        if active == 0 {
+                            return occluded;
+                        }
+                        self.retire(active);
+                    } else {
+                        sync_tmax(self.packet, self.single);
+                        let mut h = hit;
+                        while h != 0 {
+                            let i = h.trailing_zeros() as usize;
+                            h &= h - 1;
+                            self.best[i] = Some(self.lanes.get(i));
+                        }
+                    }
+                }
+            }
+            if budget == 0 {
+                continue;
+            }
+            // Pop the next entry that some lane can still hit, keeping only those lanes.
+            loop {
+                match stack.pop() {
+                    None => return occluded,
+                    Some(e) => {
+                        let m = e.mask & active & open_lanes(self.packet.tmax, e.dist);
+                        if m != 0 {
+                            cur = Entry { mask: m, ..e };
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Retired lanes get an empty interval (`tmax = -inf`): no box or triangle test accepts them.
+    #[inline(always)]
+    fn retire(&mut self, active: u32) {
+        self.packet.tmax = lane_mask::<R, K>(active).select(self.packet.tmax, R::splat(f32::NEG_INFINITY));
+    }
+
+    /// Tests the leaf `code` against the lanes of `mask` (the others are masked off for the call);
+    /// returns the lanes hit.
+    #[inline(always)]
+    fn leaf<T: TriangleTest, L: Lane, const N: usize>(
+        &mut self,
+        bvh: BvhWideRef<'_, L, N>,
+        code: u32,
+        mask: u32,
+    ) -> u32 {
+        let (first, count) = leaf_packs(code);
+        let Some(packs) = bvh.packs.get(first..first + count) else {
+            return 0;
+        };
+        self.lanes.begin(self.packet, mask);
+        let mut hit_any = 0;
+        for pack in packs {
+            let mut v = pack.valid;
+            while v != 0 {
+                let j = v.trailing_zeros() as usize;
+                v &= v - 1;
+                hit_any |= self.lanes.test::<T>(self.packet, &pack.get(j), pack.prim[j]);
+            }
+        }
+        self.lanes.end(self.packet);
+        hit_any
+    }
+}
+
+/// The packet's bounding interval: per axis the range of origins and of reciprocal directions
+/// over the active lanes, and the union of their `[tmin, tmax)`.
+struct Interval {
+    o: [(f32, f32); 3],
+    inv: [(f32, f32); 3],
+    tmin: f32,
+    tmax: f32,
+}
+
+impl Interval {
+    fn new<const K: usize>(single: &[PreparedRay; K], active: u32) -> Self {
+        let mut iv = Interval {
+            o: [(f32::INFINITY, f32::NEG_INFINITY); 3],
+            inv: [(f32::INFINITY, f32::NEG_INFINITY); 3],
+            tmin: f32::INFINITY,
+            tmax: f32::NEG_INFINITY,
+        };
+        for (i, r) in single.iter().enumerate() {
+            if active >> i & 1 == 0 {
+                continue;
+            }
+            for a in 0..3 {
+                iv.o[a] = (iv.o[a].0.min(r.origin[a]), iv.o[a].1.max(r.origin[a]));
+                iv.inv[a] = (iv.inv[a].0.min(r.inv_dir[a]), iv.inv[a].1.max(r.inv_dir[a]));
+            }
+            iv.tmin = iv.tmin.min(r.tmin);
+            iv.tmax = iv.tmax.max(r.tmax);
+        }
+        iv
+    }
+}
+
+/// Lower and upper bounds of `[a0, a1] * [b0, b1]` per lane (NaN products, from `0 * inf`, are
+/// dropped: the bound then ignores that corner, which only widens nothing it must keep since the
+/// other corners are infinite).
+#[inline(always)]
+fn product_bounds<L: Lane>(a0: L, a1: L, b0: f32, b1: f32) -> (L, L) {
+    let (b0, b1) = (L::splat(b0), L::splat(b1));
+    let (p0, p1, p2, p3) = (a0 * b0, a0 * b1, a1 * b0, a1 * b1);
+    (p0.min_l(p1).min_l(p2).min_l(p3), p0.max_l(p1).max_l(p2).max_l(p3))
+}
+
+/// Coherent packets: children are culled against the packet's interval (Wald, Boulos and Shirley
+/// 2007), leaves run the packet triangle kernels for every active lane (exact per lane, so the
+/// answers equal single rays). Returns the occluded lanes (`ANY`) or 0.
+fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool>(
+    bvh: BvhWideRef<'_, L, N>,
+    packet: &mut PreparedPacket<R, K>,
+    neg_lanes: &[R; 3],
+    single: &mut [PreparedRay; K],
+    lanes: &mut Leaves<R, K>,
+    best: &mut [Option<Hit>; K],
+    mut active: u32,
+) -> u32 {
+    let mut occluded = 0u32;
+    let mut iv = Interval::new(single, active);
+    let neg = single[active.trailing_zeros() as usize % K].neg;
+    let slack = L::splat(FAR_SLACK);
+    let mut stack = MaskStack::<STACK>::new();
+    let mut cur = 0u32;
+    // The lanes to test at a leaf: those whose own slab test accepted its box.
+    let mut cur_mask = active;
+    let mut budget = bvh.nodes.len();
+    let widened = |t: f32| t + t.abs() * FAR_SLACK;
+    loop {
+        if budget == 0 {
+            // A malformed view or a stack overflow: finish the active lanes as single rays.
+            let mut m = active;
+            while m != 0 {
+                let i = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if ANY {
+                    if occluded_from::<T, L, N>(bvh, 0, &single[i]) {
+                        occluded |= 1 << i;
+                    }
+                } else if let Some(h) = intersect_from::<T, L, N>(bvh, 0, &mut single[i]) {
+                    best[i] = Some(h);
+                }
+            }
+            return occluded;
+        }
+        if cur & LEAF_BIT == 0 {
+            budget -= 1;
+            if let Some(node) = bvh.nodes.get(cur as usize) {
+                let mut near = L::splat(iv.tmin);
+                let mut far = L::splat(iv.tmax);
+                for (a, &negative) in neg.iter().enumerate() {
+                    let (entry, exit) = if negative {
+                        (node.bounds.max[a], node.bounds.min[a])
+                    } else {
+                        (node.bounds.min[a], node.bounds.max[a])
+                    };
+                    let (o0, o1) = (L::splat(iv.o[a].0), L::splat(iv.o[a].1));
+                    let (n_lo, _) = product_bounds(entry - o1, entry - o0, iv.inv[a].0, iv.inv[a].1);
+                    let (_, f_hi) = product_bounds(exit - o1, exit - o0, iv.inv[a].0, iv.inv[a].1);
+                    near = n_lo.max_l(near);
+                    far = f_hi.min_l(far);
+                }
+                // Both bounds widened by the slab test's slack (conservative for every lane).
+                let lo = near - near.abs() * slack;
+                let mut mask = lo.le(far + far.abs() * slack).bitmask() & ((1u32 << N) - 1);
+                if mask != 0 {
+                    let mut nears = [0f32; N];
+                    lo.store(&mut nears);
+                    let (mut bmin, mut bmax) = ([[0f32; N]; 3], [[0f32; N]; 3]);
+                    for a in 0..3 {
+                        node.bounds.min[a].store(&mut bmin[a]);
+                        node.bounds.max[a].store(&mut bmax[a]);
+                    }
+                    let base = stack.len();
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let child = node.child[i];
+                        if child == EMPTY_CHILD {
+                            continue;
+                        }
+                        let lane_mask = if child & LEAF_BIT != 0 {
+                            // PERF: a leaf's triangles cost more than one more box test per lane.
+                            let b = |v: &[[f32; N]; 3]| [v[0][i], v[1][i], v[2][i]];
+                            box_lanes(packet, neg_lanes, b(&bmin), b(&bmax)).1 & active
+                        } else {
+                            active
+                        };
+                        if lane_mask == 0 {
+                            continue;
+                        }
+                        let e = Entry {
+                            code: child,
+                            dist: nears[i],
+                            mask: lane_mask,
+                        };
+                        if !stack.push_sorted(base, e) {
+                            budget = 0; // NOTE: unreachable within MAX_WIDE_DEPTH; finish as singles
+                            break;
+                        }
+                    }
+                }
+            }
+        } else if cur != EMPTY_CHILD {
+            let (first, count) = leaf_packs(cur);
+            if let Some(packs) = bvh.packs.get(first..first + count) {
+                lanes.begin(packet, cur_mask & active);
+                let mut hit_any = 0;
+                for pack in packs {
+                    let mut v = pack.valid;
+                    while v != 0 {
+                        let j = v.trailing_zeros() as usize;
+                        v &= v - 1;
+                        hit_any |= lanes.test::<T>(packet, &pack.get(j), pack.prim[j]);
+                    }
+                }
+                lanes.end(packet);
+                if hit_any != 0 && ANY {
+                    // Any hit: retire the lanes hit; stop when none is left.
+                    occluded |= hit_any;
+                    active &= !hit_any;
+                    if active == 0 {
+                        return occluded;
+                    }
+                    packet.tmax = lane_mask::<R, K>(active).select(packet.tmax, R::splat(f32::NEG_INFINITY));
+                    iv = Interval::new(single, active);
+                } else if hit_any != 0 {
+                    sync_tmax(packet, single);
+                    let mut h = hit_any;
+                    while h != 0 {
+                        let i = h.trailing_zeros() as usize;
+                        h &= h - 1;
+                        best[i] = Some(lanes.get(i));
+                    }
+                    iv.tmax = (0..K)
+                        .filter(|i| active >> i & 1 == 1)
+                        .fold(f32::NEG_INFINITY, |m, i| m.max(single[i].tmax));
+                }
+            }
+        }
+        if budget == 0 {
+            continue;
+        }
+        loop {
+            match stack.pop() {
+                None => return occluded,
+                Some(e) if e.dist <= widened(iv.tmax) && e.mask & active != 0 => {
+                    (cur, cur_mask) = (e.code, e.mask);
+                    break;
+                }
+                Some(_) => {}
+            }
+        }
+    }
+}
