@@ -162,29 +162,6 @@ mod gather {
         ]
     }
 
-    /// [`Voxel::corners_x8`](super::Voxel::corners_x8) for `f32`: one 32-bit gather per corner.
-    #[inline(always)]
-    pub(super) fn corners_f32(data: &[f32], base: i32x8, oy: i32, oz: i32) -> [f32x8; 8] {
-        let n = data.len();
-        if n < 2 || n > i32::MAX as usize {
-            return [f32x8::splat(0.0); 8]; // unreachable: an x pair is 2 voxels
-        }
-        let hi = n as i32 - 1;
-        let p = data.as_ptr().cast::<u8>();
-        // SAFETY: voxel indices 0..=n - 1 leave one voxel (4 bytes) in `data`.
-        let at = |o: i32| bytemuck::cast::<i32x8, f32x8>(unsafe { gather::<4>(p, base + i32x8::splat(o), hi) });
-        [
-            at(0),
-            at(1),
-            at(oy),
-            at(oy + 1),
-            at(oz),
-            at(oz + 1),
-            at(oz + oy),
-            at(oz + oy + 1),
-        ]
-    }
-
     /// [`Voxel::corners_x8`](super::Voxel::corners_x8) for `u16`: each pair is exactly one
     /// 32-bit word.
     #[inline(always)]
@@ -212,27 +189,6 @@ impl Voxel for f32 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self
-    }
-
-    #[inline(always)]
-    fn corners_x8(data: &[Self], base: i32x8, oy: usize, oz: usize) -> [f32x8; 8] {
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-        return gather::corners_f32(data, base, oy as i32, oz as i32);
-        #[allow(unreachable_code)]
-        if data.len() < 2 {
-            return [f32x8::splat(0.0); 8]; // unreachable, as for u8
-        }
-        // NOTE: the clamp never moves a pair the volume asks for; it drops the bounds checks.
-        let last = data.len() - 2;
-        let base = base.to_array();
-        let mut v = [[0.0f32; 8]; 8];
-        for l in 0..8 {
-            for (c, o) in [0, oy, oz, oz + oy].into_iter().enumerate() {
-                let i = (base[l] as usize + o).min(last);
-                (v[2 * c][l], v[2 * c + 1][l]) = (data[i], data[i + 1]);
-            }
-        }
-        v.map(f32x8::new)
     }
 }
 
