@@ -1,9 +1,9 @@
 //! The [`Lane`] trait: the small set of lane-wise operations the kernels need, implemented for
-//! `wide`'s [`f32x4`] and [`f32x8`] with one NaN policy (see the module docs of
+//! `wide`'s [`f32x4`], [`f32x8`] and [`f32x16`] with one NaN policy (see the module docs of
 //! [`math`](crate::math)).
 
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
-use wide::{f32x4, f32x8};
+use wide::{f32x4, f32x8, f32x16};
 
 /// A vector of `N` `f32` lanes. Comparison results are lane masks of the same type (all bits set
 /// where true), combined with `&` and `|`.
@@ -146,6 +146,7 @@ macro_rules! impl_lane {
 
 impl_lane!(f32x4, 4);
 impl_lane!(f32x8, 8);
+impl_lane!(f32x16, 16);
 
 #[cfg(test)]
 mod tests {
@@ -176,5 +177,6 @@ mod tests {
     fn lanes_match_scalar_semantics() {
         check::<f32x4>();
         check::<f32x8>();
+        check::<f32x16>();
     }
 }

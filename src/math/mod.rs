@@ -23,7 +23,7 @@
 mod lanes;
 
 pub use lanes::Lane;
-pub use wide::{f32x4, f32x8, i32x4, i32x8, u32x4, u32x8};
+pub use wide::{f32x4, f32x8, f32x16, i32x4, i32x8, u32x4, u32x8};
 
 /// Returns `a` if `a > b`, else `b` (so a NaN in either operand yields `b`).
 ///

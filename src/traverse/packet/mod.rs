@@ -55,7 +55,7 @@ mod tile;
 mod wide;
 
 /// Sixteen `f32` lanes (`wide`'s type): one AVX-512 register, or two [`f32x8`] halves.
-pub use ::wide::f32x16;
+pub use crate::math::f32x16;
 pub use tile::TileShape;
 #[cfg(feature = "alloc")]
 pub use tile::image_rays;
