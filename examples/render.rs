@@ -11,6 +11,7 @@
 use std::time::Instant;
 use strahl::build::{BuildParams, Bvh2};
 use strahl::composite::{Assignment, Tile, render_tiles};
+use strahl::geometry::offset::{hit_point, offset_origin};
 use strahl::geometry::{Triangle, Triangles};
 use strahl::layout::Bvh8;
 use strahl::scene::{self, Mesh, Rng};
@@ -158,7 +159,8 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
                 if n.dot(ray.direction) > 0.0 {
                     n = -n;
                 }
-                let p = ray.origin + ray.direction * hit.t + n * (scale * 1e-5);
+                // The AO rays start off the surface by a few ULPs (Wächter and Binder 2019).
+                let p = offset_origin(hit_point(&[a, b, c], &hit), n);
                 let mut rng = Rng::new((y as u64) << 32 | x as u64);
                 let open = (0..o.ao)
                     .filter(|_| {

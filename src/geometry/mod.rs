@@ -7,6 +7,7 @@
 mod aabb;
 mod mesh;
 pub mod morton;
+pub mod offset;
 mod ray;
 
 pub use aabb::Aabb;
