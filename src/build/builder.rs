@@ -13,13 +13,13 @@ use alloc::vec::Vec;
 /// Reusable working memory for [`Bvh2`] builds.
 ///
 /// A build of `n` primitives needs scratch memory besides the tree itself (at most `64 n` bytes of
-/// nodes and `4 n` of indices): `64 n` bytes for the median and binned builders, `80 n` (30-bit)
-/// or `96 n` (63-bit) for the LBVH, about `150 n` for the full sweep. Allocating that afresh
-/// costs more than the build on some systems: every new page is zeroed by the kernel on first
-/// touch (measured here: 40 ms for 64 MB, against 5 ms to rewrite pages already mapped). A
-/// `Builder` keeps its buffers, and [`build_into`](Self::build_into) reuses the output tree's, so
-/// that rebuilding a scene every frame touches no new memory. [`Bvh2::build`] is a one-off
-/// `Builder`.
+/// nodes and `4 n` of indices): `64 n` bytes for the median and binned builders, `72 n` (30-bit,
+/// plus up to `16 n` where most codes share their top 8 bits) or `96 n` (63-bit) for the LBVH,
+/// about `150 n` for the full sweep. Allocating that afresh costs more than the build on some
+/// systems: every new page is zeroed by the kernel on first touch (measured here: 40 ms for
+/// 64 MB, against 5 ms to rewrite pages already mapped). A `Builder` keeps its buffers, and
+/// [`build_into`](Self::build_into) reuses the output tree's, so that rebuilding a scene every
+/// frame touches no new memory. [`Bvh2::build`] is a one-off `Builder`.
 ///
 /// ```
 /// use strahl::{build::{Builder, BuildParams, Bvh2}, scene};
@@ -47,6 +47,10 @@ pub struct Builder {
     /// ... and 63-bit Morton codes.
     pub(crate) items64: Vec<Item<u64>>,
     pub(crate) tmp64: Vec<Item<u64>>,
+    /// The 30-bit LBVH's `(code << 32) | position` keys of one top-digit bucket, and their
+    /// radix-sort scratch.
+    pub(crate) packed: Vec<u64>,
+    pub(crate) packed_tmp: Vec<u64>,
     /// The full sweep's suffix areas and side flags.
     pub(crate) suffix: Vec<f32>,
     pub(crate) flags: Vec<bool>,

@@ -21,11 +21,11 @@
 //! tree over up to `n` clusters.
 
 use super::builder::{Builder, Counters};
-use super::lbvh::{Code, codes_of, gather, split_point, walk};
+use super::lbvh::{Code, codes_of, gather, sort_gather30, split_point, walk};
 use super::prims::{Box8, CBounds, PrepInfo, PrimRef, ceil_log2};
 use super::radix::{Item, sort_items};
 use super::{BuildParams, Bvh2, MortonBits, Strategy, topdown};
-use crate::geometry::morton::{MortonQuantizer, morton30_scalar, morton30_x8, morton63_scalar, morton63_x8};
+use crate::geometry::morton::{MortonQuantizer, morton63_scalar, morton63_x8};
 
 /// Builds an HLBVH.
 pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2) -> Counters {
@@ -33,15 +33,19 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
     match p.morton_bits {
         MortonBits::Bits30 => {
             let q = MortonQuantizer::new30(&cb);
-            codes_of(
-                &b.refs,
+            // The references in Morton order end up in `refs`; the bottoms read them from `alt`.
+            sort_gather30(
+                &mut b.refs,
+                &mut b.alt,
                 &mut b.items32,
-                |p| morton30_scalar(p, &q),
-                |x, y, z| morton30_x8(x, y, z, &q).to_array(),
+                &mut b.packed,
+                &mut b.packed_tmp,
+                &q,
+                out,
             );
-            sort_items(&mut b.items32, &mut b.tmp32, 30);
+            core::mem::swap(&mut b.refs, &mut b.alt);
             let mut codes = core::mem::take(&mut b.items32);
-            let c = hierarchy(b, &codes, info, p, out);
+            let c = hierarchy(b, &codes, true, info, p, out);
             core::mem::swap(&mut b.items32, &mut codes);
             c
         }
@@ -55,23 +59,27 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
             );
             sort_items(&mut b.items64, &mut b.tmp64, 63);
             let mut codes = core::mem::take(&mut b.items64);
-            let c = hierarchy(b, &codes, info, p, out);
+            let c = hierarchy(b, &codes, false, info, p, out);
             core::mem::swap(&mut b.items64, &mut codes);
             c
         }
     }
 }
 
-/// Clusters, top and bottoms over the sorted `codes`.
+/// Clusters, top and bottoms over the sorted `codes`; `gathered`: `b.alt` already holds the
+/// references in that order (and `out` their primitive indices), else they are gathered here.
 fn hierarchy<K: Code>(
     b: &mut Builder,
     codes: &[Item<K>],
+    gathered: bool,
     info: &PrepInfo,
     p: &BuildParams,
     out: &mut Bvh2,
 ) -> Counters {
-    let n = b.refs.len() as u32;
-    gather(&b.refs, &mut b.alt, codes, out);
+    let n = codes.len() as u32;
+    if !gathered {
+        gather(&b.refs, &mut b.alt, codes, out);
+    }
 
     // Clusters: cut the sorted range with the LBVH split until every piece is small enough. The
     // cap keeps `1 + ceil(log2 n) + ceil(log2 M) <= max_depth` for any number of clusters.

@@ -115,13 +115,46 @@
 //! starting tree is poor and the primitives are many per treelet
 //! ([`min_prims`](TreeletParams::min_prims)), or to improve a tree that is kept.
 //!
-//! (Trace speeds of the bunny varied between runs by the load; ranges over two runs.) Where the
-//! time goes, single-threaded, on the soup: the binned builders spend about a third each in
-//! binning, in the per-node work of the roughly one million nodes of 2 to 8 references (split
-//! search, bookkeeping) and in partitioning; the LBVH about 15% in the radix sort, 20% gathering
-//! the references into Morton order (random reads: latency and TLB bound) and half in the
-//! hierarchy walk. Cold builds are dominated by first-touch page faults on this machine (64 MB of
-//! new pages cost about 40 ms).
+//! (Trace speeds of the bunny varied between runs by the load; ranges over two runs.)
+//!
+//! **Single-threaded speed work** (the tables above were measured before it). `cargo test
+//! --release --test build_speed -- --ignored --nocapture speed` with `STRAHL_REPS=10`, on the
+//! 1M soup: warm builder, the code before and after built side by side and run alternately in
+//! the same session (load average 1 to 3.5 from other jobs); each run keeps its best of 10
+//! builds, the table the best run of 2 to 8 (a run's best varied by up to 40% with the load;
+//! even the best runs were slower than the first table's, from a busier machine).
+//! Instruction counts (and cache misses, simulated for a 32 KB L1 and a 512 KB L2) from
+//! `valgrind --tool=callgrind` (2^16 soup, two builds, `build_into` only), which the load does
+//! not move:
+//!
+//! | builder | before ms (Mtri/s) | after ms (Mtri/s) | instructions | SAH cost before / after |
+//! |---|---|---|---|---|
+//! | `fastest()` (LBVH, 30-bit) | 77 (13.6) | 69 (15.1) | +12% (D1 misses -22%, L2 -24%) | 525.0 / 525.0 |
+//! | LBVH, 63-bit | 157 (6.7) | 129 (8.1) | | 525.0 / 525.0 |
+//! | HLBVH, clusters of 32 | 130 (8.1) | 121 (8.7) | | 523.6 / 523.6 |
+//! | `fast()` | 258 (4.1) | 236 (4.4) | -5.5% | 483.68 / 483.24 |
+//! | `balanced()` | 378 (2.8) | 335 (3.1) | -3.3% | 468.89 / 468.72 |
+//!
+//! What changed: the 30-bit LBVH (and HLBVH) sort the references by bucket instead of gathering
+//! them at random (see `lbvh.rs`), which took the LBVH's front end (codes, sort, gather) from about
+//! 80 to 40 ms under load; `prepare` (`prims.rs`) checks and packs each box in four lanes (two to
+//! three times faster); the binned builders bin into two sets of bins, grow the children's
+//! centroid bounds with one `max` per side, split ranges of up to 16 references (not 8) by the
+//! exact sweep (a slightly better tree, as many instructions), rank those without the tie test
+//! where no keys tie, skip the empty-side test in the bin sweep (its cost is NaN anyway), and
+//! build a left child without a trip through the task stack. Every tree is the same as before
+//! except the binned ones, whose SAH cost fell by 0.04 to 0.1%. The targets of 40 (LBVH) and 10
+//! (binned) million triangles per second are not reached on this machine.
+//!
+//! Where the time goes now, single-threaded, on the soup (under load): the LBVH spends about
+//! 10% in `prepare`, 8% computing codes, 20% in the bucket scatter (32 MB read and written: bound
+//! by memory bandwidth), 22% sorting and gathering within buckets and 40% in the hierarchy walk
+//! (a third of it the binary searches for the splits). The binned builders spend about 20% in the
+//! top levels (ranges of more than 16K references, out of cache: binning and partition passes
+//! bound by memory bandwidth) and the rest in cache, bound by instructions: of those (callgrind,
+//! `balanced()`) about 29% in the exact sweep of small ranges, 26% in binning and bin sweeps, 19%
+//! in partitioning and 18% in the per-node loop. Cold builds are dominated by first-touch page
+//! faults on this machine (64 MB of new pages cost about 40 ms).
 
 mod binned;
 mod builder;

@@ -5,7 +5,7 @@ use super::{BuildError, Node};
 use crate::geometry::{Aabb, Triangles};
 use crate::math::{Lane, f32x4, f32x8};
 use alloc::vec::Vec;
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 /// What the builders need of a primitive: its count and each one's bounding box.
 ///
@@ -40,10 +40,11 @@ impl<T: Triangles + ?Sized> Primitives for T {
     #[inline]
     fn prim_bounds(&self, i: usize) -> Option<Aabb> {
         let [a, b, c] = self.triangle(i)?;
+        let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
         // NOTE: `min`/`max` ignore NaN, so finiteness is checked on the vertices themselves:
         // `v * 0` is 0 for finite `v`, NaN for an infinity or a NaN.
-        let finite = (a * 0.0 + b * 0.0 + c * 0.0) == Vec3::ZERO;
-        finite.then(|| Aabb::new(a.min(b).min(c), a.max(b).max(c)))
+        let finite = (a * 0.0 + b * 0.0 + c * 0.0) == Vec3A::ZERO;
+        finite.then(|| Aabb::new(a.min(b).min(c).into(), a.max(b).max(c).into()))
     }
 }
 
@@ -172,12 +173,21 @@ impl Box8 {
 pub(crate) struct PrimRef(pub f32x8);
 
 impl PrimRef {
-    #[inline]
+    #[cfg(test)]
     pub fn new(b: &Aabb, index: u32) -> Self {
         let idx = f32::from_bits(index ^ INDEX_XOR);
         Self(f32x8::new([
             -b.min.x, -b.min.y, -b.min.z, idx, b.max.x, b.max.y, b.max.z, 0.0,
         ]))
+    }
+
+    /// A reference to the box `lo ..= hi` (lanes 0..3) with index `index`.
+    #[inline(always)]
+    pub fn from_halves(lo: f32x4, hi: f32x4, index: u32) -> Self {
+        let mut a: [u32; 8] = bytemuck::cast([-lo, hi]);
+        a[3] = index ^ INDEX_XOR;
+        a[7] = 0;
+        Self(bytemuck::cast(a))
     }
 
     /// A reference with box `b` (not empty) and index `index`.
@@ -187,6 +197,22 @@ impl PrimRef {
         a[3] = f32::from_bits(index ^ INDEX_XOR);
         a[7] = 0.0;
         Self(f32x8::new(a))
+    }
+
+    /// This reference with `tag`'s bits in lane 7 (0 in every reference the builders keep; the
+    /// LBVH's sort carries codes there for a while).
+    #[inline(always)]
+    pub fn with_tag(self, tag: u32) -> Self {
+        let mut a: [u32; 8] = bytemuck::cast(self.0);
+        a[7] = tag;
+        Self(bytemuck::cast(a))
+    }
+
+    /// The bits of lane 7 (see [`with_tag`](Self::with_tag)).
+    #[inline(always)]
+    pub fn tag(&self) -> u32 {
+        let a: [u32; 8] = bytemuck::cast(self.0);
+        a[7]
     }
 
     /// The primitive index.
@@ -290,12 +316,22 @@ pub(crate) fn prepare<P: Primitives + ?Sized>(prims: &P, refs: &mut Vec<PrimRef>
     let mut bounds = Box8::EMPTY;
     let mut cbounds = CBounds::EMPTY;
     for i in 0..total {
-        if let Some(b) = usable_bounds(prims, i) {
-            let r = PrimRef::new(&b, i as u32);
-            bounds.grow(r.bounds());
-            cbounds.grow(r.c2());
-            refs.push(r);
+        // `usable_bounds` in four lanes: extent `d >= 0`, and `d` and `min + max` finite
+        // (`x * 0 == 0` only for finite `x`; NaN fails every comparison). Finite `d` and
+        // `min + max` imply finite bounds.
+        // PERF: about twice as fast as the scalar checks (measured in `prepare` on the 1M soup).
+        let Some(b) = prims.prim_bounds(i) else { continue };
+        let lo = f32x4::new([b.min.x, b.min.y, b.min.z, 0.0]);
+        let hi = f32x4::new([b.max.x, b.max.y, b.max.z, 0.0]);
+        let (d, c2) = (hi - lo, hi + lo);
+        let ok = d.ge(f32x4::ZERO) & (d * f32x4::ZERO).eq(f32x4::ZERO) & (c2 * f32x4::ZERO).eq(f32x4::ZERO);
+        if ok.bitmask() & 7 != 7 {
+            continue;
         }
+        let r = PrimRef::from_halves(lo, hi, i as u32);
+        bounds.grow(r.bounds());
+        cbounds.grow(c2);
+        refs.push(r);
     }
     Ok(PrepInfo {
         bounds,
@@ -355,6 +391,38 @@ mod tests {
         ];
         for (n, l) in want {
             assert_eq!(ceil_log2(n), l, "{n}");
+        }
+    }
+
+    #[test]
+    fn prepare_keeps_exactly_the_usable_boxes() {
+        let v = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+        let (inf, nan, big) = (f32::INFINITY, f32::NAN, f32::MAX);
+        let boxes = [
+            Aabb::new(v(0.0, 0.0, 0.0), v(1.0, 2.0, 3.0)),
+            Aabb::new(v(1.0, 0.0, 0.0), v(0.0, 1.0, 1.0)), // empty on x
+            Aabb::new(v(0.0, 0.0, 0.0), v(0.0, 0.0, 0.0)), // a point
+            Aabb::new(v(0.0, nan, 0.0), v(1.0, 1.0, 1.0)),
+            Aabb::new(v(0.0, 0.0, 0.0), v(1.0, 1.0, inf)),
+            Aabb::new(v(-inf, 0.0, 0.0), v(1.0, 1.0, 1.0)),
+            Aabb::new(v(-big, 0.0, 0.0), v(big, 1.0, 1.0)), // extent overflows
+            Aabb::new(v(big, 0.0, 0.0), v(big, 1.0, 1.0)),  // centre overflows
+            Aabb::new(v(-0.0, -1e-40, 5.0), v(0.0, 1e-40, 5.0)),
+            Aabb::new(v(-big, -big, -big), v(0.0, 0.0, 0.0)),
+        ];
+        let mut refs = Vec::new();
+        let info = prepare(&boxes[..], &mut refs).unwrap();
+        let want: Vec<u32> = (0..boxes.len() as u32)
+            .filter(|&i| usable_bounds(&boxes[..], i as usize).is_some())
+            .collect();
+        assert_eq!(refs.iter().map(PrimRef::index).collect::<Vec<_>>(), want);
+        assert_eq!(want, [0, 2, 8, 9]);
+        assert_eq!(info.invalid, 6);
+        for r in &refs {
+            let i = r.index() as usize;
+            assert_eq!(r.bounds().to_aabb(), boxes[i]);
+            assert_eq!(r.tag(), 0);
+            assert_eq!(r.with_tag(77).tag(), 77);
         }
     }
 }

@@ -116,8 +116,9 @@ pub(crate) fn subtree(
     let bins = &mut *bins;
     let c = &mut *c;
     stack.clear();
-    stack.push(root);
-    while let Some(t) = stack.pop() {
+    // The left child is built next, without a trip through the stack.
+    let mut next = Some(root);
+    while let Some(t) = next.take().or_else(|| stack.pop()) {
         c.max_depth = c.max_depth.max(t.depth);
         let count = t.end - t.begin;
         let range = t.begin as usize..t.end as usize;
@@ -241,7 +242,7 @@ pub(crate) fn subtree(
             bounds: split.right,
             cb: split.rcb,
         });
-        stack.push(Task {
+        next = Some(Task {
             node: left,
             begin: t.begin,
             end: mid,

@@ -1,0 +1,89 @@
+//! Build-speed harness for the BVH2 builders (ignored: run by hand).
+//!
+//! `cargo test --release --test build_speed -- --ignored --nocapture speed`: each builder once to
+//! warm its [`Builder`], then `STRAHL_REPS` timed builds (default 5), best and median. `STRAHL_N`
+//! sets the soup size (`scene::thin_soup(n, 1)`, default 2^20); `STRAHL_ONLY` a comma-separated
+//! list of builders (`fastest`, `lbvh63`, `fast`, `binned8all`, `balanced`, `median`, `quality`,
+//! `hlbvh`).
+
+use std::time::Instant;
+use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, Strategy};
+use strahl::scene;
+
+#[test]
+#[ignore]
+fn speed() {
+    let env = |k: &str| std::env::var(k).ok();
+    let n: usize = env("STRAHL_N").and_then(|s| s.parse().ok()).unwrap_or(1 << 20);
+    let reps: usize = env("STRAHL_REPS").and_then(|s| s.parse().ok()).unwrap_or(5).max(1);
+    let only = env("STRAHL_ONLY");
+    let soup = scene::thin_soup(n, 1);
+    let list = [
+        ("fastest", BuildParams::fastest()),
+        (
+            "lbvh63",
+            BuildParams {
+                morton_bits: MortonBits::Bits63,
+                ..BuildParams::fastest()
+            },
+        ),
+        ("fast", BuildParams::fast()),
+        (
+            "binned8all",
+            BuildParams {
+                bin_axes: BinAxes::All,
+                ..BuildParams::fast()
+            },
+        ),
+        ("balanced", BuildParams::balanced()),
+        ("median", BuildParams::median()),
+        ("quality", BuildParams::quality()),
+        (
+            "hlbvh",
+            BuildParams {
+                strategy: Strategy::Hlbvh,
+                max_leaf_size: 4,
+                ..BuildParams::fastest()
+            },
+        ),
+    ];
+    for (name, p) in &list {
+        if only.as_ref().is_some_and(|o| !o.split(',').any(|x| x == *name)) {
+            continue;
+        }
+        let mut b = Builder::new();
+        let mut bvh = Bvh2::default();
+        b.build_into(&soup[..], p, &mut bvh).unwrap();
+        let mut times = Vec::new();
+        let cpu0 = cpu_seconds();
+        for _ in 0..reps {
+            let t0 = Instant::now();
+            b.build_into(&soup[..], p, &mut bvh).unwrap();
+            times.push(t0.elapsed().as_secs_f64());
+        }
+        let cpu = cpu_seconds().map(|c| (c - cpu0.unwrap_or(c)) / reps as f64);
+        times.sort_by(f64::total_cmp);
+        let v = bvh.validate(&soup[..]).unwrap();
+        println!(
+            "{name:10} best {:6.2} Mtri/s ({:7.2} ms, median {:7.2} ms, CPU {:7.2} ms)  SAH {:8.3}  nodes {}  depth {}",
+            n as f64 / times[0] / 1e6,
+            times[0] * 1e3,
+            times[times.len() / 2] * 1e3,
+            cpu.unwrap_or(f64::NAN) * 1e3,
+            bvh.sah_cost(1.0, 1.0),
+            bvh.nodes.len(),
+            v.max_depth
+        );
+    }
+}
+
+/// CPU time of this thread (user + system), from `/proc/thread-self/stat` (Linux; 10 ms ticks):
+/// unlike wall-clock time, it leaves out the time the thread waits for a core on a loaded machine.
+fn cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/thread-self/stat").ok()?;
+    // Fields after the command name (which may hold spaces): state is field 3, utime 14, stime 15.
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
