@@ -20,9 +20,11 @@
 //! `examples/replay.rs` prints a decoded input and checks it.
 #![warn(missing_docs)]
 
+pub mod bvh;
 pub mod check;
 pub mod decode;
 pub mod exact;
 
+pub use bvh::{BvhCase, check_bvh};
 pub use check::{Kernel, brute_force_closest, check_kernels, same_hit};
 pub use decode::{Input, KernelCase, Mode};

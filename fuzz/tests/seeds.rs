@@ -5,7 +5,7 @@
 //! regression seeds.
 
 use std::path::{Path, PathBuf};
-use strahl_fuzz::{KernelCase, check_kernels};
+use strahl_fuzz::{BvhCase, KernelCase, check_bvh, check_kernels};
 
 fn files(target: &str) -> Vec<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("seeds").join(target);
@@ -53,4 +53,36 @@ fn short_inputs() {
             check_kernels(&KernelCase::decode(&data[..n]));
         }
     }
+}
+
+#[test]
+fn bvh_seeds() {
+    let seeds = files("bvh");
+    assert!(seeds.len() >= 4);
+    let mut failed = Vec::new();
+    for path in &seeds {
+        let data = std::fs::read(path).unwrap();
+        if std::panic::catch_unwind(|| check_bvh(&BvhCase::decode(&data))).is_err() {
+            failed.push(path.display().to_string());
+        }
+        for n in (0..data.len()).step_by(13) {
+            check_bvh(&BvhCase::decode(&data[..n]));
+        }
+    }
+    assert!(failed.is_empty(), "failed: {failed:#?}");
+    // The seeds are not vacuous: their rays hit something, in both modes.
+    let hits: usize = seeds
+        .iter()
+        .map(|p| {
+            let case = BvhCase::decode(&std::fs::read(p).unwrap());
+            case.rays
+                .iter()
+                .filter(|r| {
+                    strahl::traverse::intersect_brute_force::<strahl::traverse::Watertight, _>(&case.tris[..], r)
+                        .is_some()
+                })
+                .count()
+        })
+        .sum();
+    assert!(hits >= 4, "only {hits} seed rays hit anything");
 }

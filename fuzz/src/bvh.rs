@@ -1,0 +1,167 @@
+//! The `bvh` target: every builder (and the treelet pass), the BVH4/BVH8 collapse, single-ray
+//! traversal of all three trees and 8-ray packets, against brute force.
+//!
+//! Input layout (every byte string decodes; see [`decode`](crate::decode) for values):
+//!
+//! ```text
+//! header   1 byte   bit 0: mode (0 chaos, 1 grid); bit 1: append a copy of every triangle
+//!                   (coincident centroids, ties); bits 2-3: groups of 8 triangles - 1
+//! tris     groups x 8 triangles (shared vertex pool, as in `kernels`)
+//! rays     8 x (origin, direction: 3 values each; range selector)
+//! ```
+//!
+//! What must hold, in both modes: every build succeeds and `validate()` passes; every valid
+//! primitive is in the tree; closest hits of BVH2, BVH4, BVH8 and 8-ray packets have the `t` of
+//! brute force over the tree's primitives, bit for bit, and the same primitive unless another one
+//! hits at that same `t`; any-hit answers agree.
+
+use crate::decode::{Input, Mode};
+use strahl::build::{BuildParams, Bvh2, MortonBits, Refine, Strategy, TreeletParams};
+use strahl::geometry::{Hit, Triangle};
+use strahl::intersect::{PreparedRay, watertight};
+use strahl::layout::{Bvh4, Bvh8};
+use strahl::traverse::{Watertight, packet};
+use strahl::{Ray, Vec3};
+
+/// A decoded `bvh` input.
+#[derive(Clone, Debug)]
+pub struct BvhCase {
+    /// The input mode.
+    pub mode: Mode,
+    /// The scene.
+    pub tris: Vec<Triangle>,
+    /// The rays.
+    pub rays: Vec<Ray>,
+}
+
+impl BvhCase {
+    /// Decodes `data` (never fails).
+    pub fn decode(data: &[u8]) -> Self {
+        let mut inp = Input::new(data);
+        let h = inp.byte();
+        let mode = if h & 1 == 1 { Mode::Grid } else { Mode::Chaos };
+        let groups = usize::from(h >> 2 & 3) + 1;
+        let mut tris = Vec::new();
+        for _ in 0..groups {
+            tris.extend(inp.triangles::<8>(mode));
+        }
+        if h & 2 != 0 {
+            tris.extend_from_within(..);
+        }
+        let rays = (0..8)
+            .map(|_| {
+                let o = inp.vec3(mode);
+                let d = inp.vec3(mode);
+                let (tmin, tmax) = inp.range(mode);
+                Ray::with_range(o, d, tmin, tmax)
+            })
+            .collect();
+        Self { mode, tris, rays }
+    }
+}
+
+/// The builders checked, from fastest to best, with the hybrids and refinement.
+pub fn builders() -> Vec<BuildParams> {
+    vec![
+        BuildParams::fastest(),
+        BuildParams {
+            morton_bits: MortonBits::Bits63,
+            ..BuildParams::fastest()
+        },
+        BuildParams::median(),
+        BuildParams::fast(),
+        BuildParams::balanced(),
+        BuildParams::quality(),
+        BuildParams::hybrid(),
+        BuildParams {
+            strategy: Strategy::Hlbvh,
+            cluster_size: 2,
+            refine: Refine::None,
+            ..BuildParams::hybrid()
+        },
+        BuildParams {
+            refine: Refine::Treelets(TreeletParams::new()),
+            ..BuildParams::fastest()
+        },
+    ]
+}
+
+/// `got` is `want` up to ties: the same `t` bits, and the same primitive or another one of the
+/// tree's that hits `ray` at exactly that `t`.
+fn agrees(tris: &[Triangle], ray: &Ray, got: Option<Hit>, want: Option<Hit>, what: &str) {
+    match (got, want) {
+        (None, None) => {}
+        (Some(g), Some(w)) => {
+            assert_eq!(
+                g.t.to_bits(),
+                w.t.to_bits(),
+                "{what}: t {} against brute force {}",
+                g.t,
+                w.t
+            );
+            if g.prim != w.prim {
+                let r = PreparedRay::new(ray);
+                let alone = tris
+                    .get(g.prim as usize)
+                    .and_then(|t| watertight::intersect_scalar(&r, t, g.prim));
+                assert_eq!(
+                    alone.map(|h| h.t.to_bits()),
+                    Some(w.t.to_bits()),
+                    "{what}: prim {} is no tie",
+                    g.prim
+                );
+            }
+        }
+        _ => panic!("{what}: {got:?} against brute force {want:?}"),
+    }
+}
+
+/// Checks one decoded input (panics on a failed property).
+pub fn check_bvh(case: &BvhCase) {
+    let tris = &case.tris[..];
+    for params in builders() {
+        let (b2, stats) = Bvh2::build(tris, &params).expect("every preset is valid");
+        let report = b2
+            .validate(tris)
+            .unwrap_or_else(|e| panic!("{params:?}: validate: {e:?}"));
+        assert_eq!(report.primitives, stats.primitives, "{params:?}");
+        assert_eq!((stats.primitives + stats.invalid) as usize, tris.len(), "{params:?}");
+        // Brute force over the primitives the tree holds (the others are documented as left out).
+        let mut kept: Vec<Triangle> = vec![[Vec3::NAN; 3]; tris.len()];
+        for &p in &b2.prim_indices {
+            kept[p as usize] = tris[p as usize];
+        }
+        let b4 = Bvh4::from_bvh2(&b2, tris).expect("a valid tree collapses");
+        let b8 = Bvh8::from_bvh2(&b2, tris).expect("a valid tree collapses");
+        let mut packet_hits = [None; 8];
+        packet::intersect8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_hits, packet::DEFAULT_SWITCH);
+        let mut packet_pure = [None; 8];
+        packet::intersect8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_pure, 0);
+        let mut packet_occ = [false; 8];
+        packet::occluded8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_occ);
+        for (i, ray) in case.rays.iter().enumerate() {
+            let want = strahl::traverse::intersect_brute_force::<Watertight, _>(&kept[..], ray);
+            let what = |s: &str| format!("{:?} {:?} ray {i} {s}", params.strategy, params.refine);
+            agrees(
+                &kept,
+                ray,
+                b2.intersect::<Watertight, _>(tris, ray),
+                want,
+                &what("bvh2"),
+            );
+            agrees(&kept, ray, b4.intersect::<Watertight>(ray), want, &what("bvh4"));
+            agrees(&kept, ray, b8.intersect::<Watertight>(ray), want, &what("bvh8"));
+            agrees(&kept, ray, packet_hits[i], want, &what("packet8 hybrid"));
+            agrees(&kept, ray, packet_pure[i], want, &what("packet8"));
+            let occ = strahl::traverse::occluded_brute_force::<Watertight, _>(&kept[..], ray);
+            assert_eq!(
+                b2.occluded::<Watertight, _>(tris, ray),
+                occ,
+                "{}",
+                what("bvh2 occluded")
+            );
+            assert_eq!(b8.occluded::<Watertight>(ray), occ, "{}", what("bvh8 occluded"));
+            assert_eq!(packet_occ[i], occ, "{}", what("packet8 occluded"));
+        }
+    }
+}
