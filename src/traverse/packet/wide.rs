@@ -28,14 +28,19 @@ pub(super) fn lane_mask<R: Lane, const K: usize>(bits: u32) -> R {
     R::load(&m)
 }
 
-/// `-0.0` in the lanes whose direction has its sign bit set on each axis, `+0.0` elsewhere.
+/// A lane mask per axis: all bits set in the lanes whose direction has its sign bit set, zero
+/// elsewhere.
+///
+/// NOTE: full masks, not `-0.0`: `select` is a sign-bit blend on SSE4.1 and AVX but a bitwise
+/// `(m & a) | (!m & b)` on plain SSE2, where a sign-bit-only mask would mix the bits of both
+/// planes (found by the `bvh` fuzz target on an SSE2 build: a packet lane missed a hit).
 #[inline(always)]
 pub(super) fn sign_lanes<R: Lane, const K: usize>(single: &[PreparedRay; K]) -> [R; 3] {
     let mut s = [[0f32; K]; 3];
     for (i, r) in single.iter().enumerate() {
         for (axis, &neg) in s.iter_mut().zip(&r.neg) {
             if neg {
-                axis[i] = -0.0;
+                axis[i] = f32::from_bits(u32::MAX);
             }
         }
     }
