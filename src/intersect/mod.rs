@@ -86,7 +86,22 @@ impl PreparedRay {
         if !ray.is_valid() {
             return Self::EMPTY;
         }
-        let d = ray.direction;
+        // NOTE: subnormal direction components are flushed to a zero of the same sign: their
+        // reciprocal overflows to infinity, so the slab test would treat the ray as parallel to
+        // that slab while the triangle tests still moved along it, and a BVH could cull a hit
+        // brute force finds (found by the `bvh` fuzz target). Every kernel sees the flushed
+        // direction, so they all answer for the same ray.
+        let flush = |x: f32| {
+            if x.abs() < f32::MIN_POSITIVE {
+                0.0f32.copysign(x)
+            } else {
+                x
+            }
+        };
+        let d = Vec3::new(flush(ray.direction.x), flush(ray.direction.y), flush(ray.direction.z));
+        if d == Vec3::ZERO {
+            return Self::EMPTY; // every component subnormal: no direction left
+        }
         // Dominant axis of the direction; ties go to the lower axis.
         let a = d.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
@@ -305,5 +320,20 @@ mod tests {
         );
         let [_, wt] = all_widths(&Ray::new(Vec3::ZERO, Vec3::Z), &tri);
         assert_eq!(wt, None);
+    }
+    /// Subnormal direction components become zeros of the same sign (their reciprocal would
+    /// overflow), so the slab test and the triangle tests answer for the same ray; a direction
+    /// with nothing but subnormals is invalid.
+    #[test]
+    fn subnormal_directions_are_flushed() {
+        let r = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::new(-7e-15, 1e-45, -1.128e-42)));
+        assert_eq!(r.direction.x, -7e-15);
+        assert_eq!(
+            (r.direction.y.to_bits(), r.direction.z.to_bits()),
+            (0, (-0.0f32).to_bits())
+        );
+        assert_eq!((r.inv_dir.y, r.inv_dir.z), (f32::INFINITY, f32::NEG_INFINITY));
+        assert!(r.neg[2] && !r.neg[1]);
+        assert!(PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::splat(1e-40))).is_empty());
     }
 }
