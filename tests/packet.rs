@@ -6,6 +6,7 @@
 
 mod common;
 
+use common::{bounds, mixed_rays};
 use proptest::prelude::*;
 use std::sync::OnceLock;
 use strahl::build::{BuildParams, Bvh2};
@@ -29,65 +30,6 @@ fn scene_of(tris: Vec<Triangle>) -> Scene {
     let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
     let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
     Scene { tris, b2, b4, b8 }
-}
-
-fn bounds(tris: &[Triangle]) -> (Vec3, Vec3) {
-    let b = tris
-        .iter()
-        .flatten()
-        .filter(|v| v.is_finite())
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(*v), hi.max(*v))
-        });
-    if b.0.x <= b.1.x { b } else { (Vec3::ZERO, Vec3::ONE) }
-}
-
-/// Incoherent rays (as in tests/wide.rs): aimed from outside, from inside in random directions,
-/// axis-aligned with exact zeros and -0.0, limited ranges; then bad rays.
-fn mixed_rays(tris: &[Triangle], n: usize, seed: u64) -> Vec<Ray> {
-    let mut rng = Rng::new(seed);
-    let (lo, hi) = bounds(tris);
-    let size = (hi - lo).max_element().max(1e-6);
-    let mut out = Vec::with_capacity(n + 8);
-    for i in 0..n {
-        let r = match i % 4 {
-            0 => {
-                let t = tris[(rng.u64() % tris.len() as u64) as usize];
-                let target = (t[0] + t[1] + t[2]) / 3.0;
-                let o = (lo + hi) * 0.5 + rng.unit_vector() * size * 2.0;
-                Ray::new(o, target - o)
-            }
-            1 => Ray::new(
-                lo + (hi - lo) * Vec3::new(rng.f32(), rng.f32(), rng.f32()),
-                rng.unit_vector(),
-            ),
-            2 => {
-                let mut d = [0.0f32; 3];
-                let a = (rng.u64() % 3) as usize;
-                d[a] = if rng.f32() < 0.5 { 1.0 } else { -1.0 };
-                for (k, x) in d.iter_mut().enumerate() {
-                    if k != a && rng.f32() < 0.5 {
-                        *x = -0.0;
-                    }
-                }
-                Ray::new(
-                    lo + (hi - lo) * Vec3::new(rng.f32(), rng.f32(), rng.f32()),
-                    Vec3::from_array(d),
-                )
-            }
-            _ => {
-                let o = (lo + hi) * 0.5 + rng.unit_vector() * size;
-                Ray::with_range(o, rng.unit_vector(), size * rng.f32() * 0.5, size * (0.5 + rng.f32()))
-            }
-        };
-        out.push(r);
-    }
-    out.push(Ray::new(Vec3::NAN, Vec3::X));
-    out.push(Ray::new(Vec3::ZERO, Vec3::new(f32::NAN, 1.0, 0.0)));
-    out.push(Ray::new(Vec3::ZERO, Vec3::ZERO));
-    out.push(Ray::new(Vec3::splat(f32::INFINITY), Vec3::X));
-    out.push(Ray::with_range(lo, hi - lo, 1.0, 0.5));
-    out
 }
 
 /// A pinhole camera looking at the scene, `w x h` pixels in tiles of `shape` (coherent packets),

@@ -2,70 +2,15 @@
 //! unless two triangles tie at that `t`) and the same any-hit answers, for every builder, on
 //! random, clustered and adversarial scenes, with NaN rays, zero direction components and -0.0.
 
+mod common;
+
+use common::mixed_rays as rays;
 use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::{Hit, Triangle};
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
 use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_brute_force, occluded_brute_force};
 use strahl::{Ray, Vec3};
-
-fn rays(tris: &[Triangle], n: usize, seed: u64) -> Vec<Ray> {
-    let mut rng = Rng::new(seed);
-    let b = tris
-        .iter()
-        .flatten()
-        .filter(|v| v.is_finite())
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(*v), hi.max(*v))
-        });
-    let (lo, hi) = if b.0.x <= b.1.x { b } else { (Vec3::ZERO, Vec3::ONE) };
-    let size = (hi - lo).max_element().max(1e-6);
-    let mut out = Vec::with_capacity(n + 16);
-    for i in 0..n {
-        let r = match i % 4 {
-            // From outside, aimed at a random triangle's centroid.
-            0 => {
-                let t = tris[(rng.u64() % tris.len() as u64) as usize];
-                let target = (t[0] + t[1] + t[2]) / 3.0;
-                let o = (lo + hi) * 0.5 + rng.unit_vector() * size * 2.0;
-                Ray::new(o, target - o)
-            }
-            // From inside the bounds in a random direction.
-            1 => Ray::new(
-                lo + (hi - lo) * Vec3::new(rng.f32(), rng.f32(), rng.f32()),
-                rng.unit_vector(),
-            ),
-            // Axis-aligned, with exact zeros and -0.0 components.
-            2 => {
-                let mut d = [0.0f32; 3];
-                let a = (rng.u64() % 3) as usize;
-                d[a] = if rng.f32() < 0.5 { 1.0 } else { -1.0 };
-                for (k, x) in d.iter_mut().enumerate() {
-                    if k != a && rng.f32() < 0.5 {
-                        *x = -0.0;
-                    }
-                }
-                Ray::new(
-                    lo + (hi - lo) * Vec3::new(rng.f32(), rng.f32(), rng.f32()),
-                    Vec3::from_array(d),
-                )
-            }
-            // A limited range [tmin, tmax).
-            _ => {
-                let o = (lo + hi) * 0.5 + rng.unit_vector() * size;
-                Ray::with_range(o, rng.unit_vector(), size * rng.f32() * 0.5, size * (0.5 + rng.f32()))
-            }
-        };
-        out.push(r);
-    }
-    // Bad rays: NaN, infinite, zero direction, empty range.
-    out.push(Ray::new(Vec3::NAN, Vec3::X));
-    out.push(Ray::new(Vec3::ZERO, Vec3::new(f32::NAN, 1.0, 0.0)));
-    out.push(Ray::new(Vec3::ZERO, Vec3::ZERO));
-    out.push(Ray::new(Vec3::splat(f32::INFINITY), Vec3::X));
-    out.push(Ray::with_range(lo, hi - lo, 1.0, 0.5));
-    out
-}
 
 fn same(a: Option<Hit>, b: Option<Hit>, tris: &[Triangle], ray: &Ray, what: &str) {
     match (a, b) {
