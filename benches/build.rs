@@ -53,8 +53,12 @@
 //! written from this run's measurements, marking the contenders that no other beats on both
 //! build time and SAH cost (and, separately, on build time and trace time).
 
+#[path = "common/mod.rs"]
+mod common;
 #[path = "peers/mod.rs"]
 mod peers;
+
+use common::BvhCrateTri;
 
 use criterion::{
     BenchmarkGroup, Criterion, SamplingMode, Throughput, criterion_group, criterion_main, measurement::WallTime,
@@ -215,29 +219,6 @@ fn timed<T>(f: impl FnOnce() -> T) -> (T, Duration) {
     let t = Instant::now();
     let r = f();
     (r, t.elapsed())
-}
-
-/// A triangle for the `bvh` crate (it stores each shape's leaf index in the shape).
-struct BvhCrateTri {
-    a: nalgebra::Point3<f32>,
-    b: nalgebra::Point3<f32>,
-    c: nalgebra::Point3<f32>,
-    node: usize,
-}
-
-impl bvh::aabb::Bounded<f32, 3> for BvhCrateTri {
-    fn aabb(&self) -> bvh::aabb::Aabb<f32, 3> {
-        bvh::aabb::Aabb::empty().grow(&self.a).grow(&self.b).grow(&self.c)
-    }
-}
-
-impl bvh::bounding_hierarchy::BHShape<f32, 3> for BvhCrateTri {
-    fn set_bh_node_index(&mut self, i: usize) {
-        self.node = i;
-    }
-    fn bh_node_index(&self) -> usize {
-        self.node
-    }
 }
 
 struct BvhCratePeer {

@@ -15,8 +15,12 @@
 //!
 //! `cargo bench --bench packet -- --noplot` (add `--features embree` for Embree).
 
+#[path = "common/mod.rs"]
+mod common;
 #[path = "peers/mod.rs"]
 mod peers;
+
+use common::diffuse_rays;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -24,7 +28,7 @@ use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::{Hit, Triangle};
 use strahl::layout::Bvh8;
 use strahl::math::{f32x4, f32x8};
-use strahl::scene::{self, Rng};
+use strahl::scene;
 use strahl::traverse::Moller;
 use strahl::traverse::packet::{self, TileShape, f32x16};
 use strahl::{Aabb, Ray, Vec3};
@@ -55,36 +59,6 @@ fn primary_rays(b: &Aabb, w: u32, h: u32, shape: TileShape) -> Vec<Ray> {
         let v = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
         Ray::new(eye, fw + right * u + up * v)
     })
-}
-
-/// `n` random points on the surface with their (geometric) normals (as in `benches/trace.rs`).
-fn surface_points(tris: &[Triangle], n: usize, rng: &mut Rng) -> Vec<(Vec3, Vec3)> {
-    (0..n)
-        .filter_map(|_| {
-            let t = tris[(rng.u64() % tris.len() as u64) as usize];
-            let (mut u, mut v) = (rng.f32(), rng.f32());
-            if u + v > 1.0 {
-                (u, v) = (1.0 - u, 1.0 - v);
-            }
-            let p = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
-            let nrm = (t[1] - t[0]).cross(t[2] - t[0]).try_normalize()?;
-            Some((p, nrm))
-        })
-        .collect()
-}
-
-fn diffuse_rays(tris: &[Triangle], n: usize, scale: f32) -> Vec<Ray> {
-    let mut rng = Rng::new(5);
-    surface_points(tris, n, &mut rng)
-        .into_iter()
-        .map(|(p, nrm)| {
-            let mut d = rng.unit_vector();
-            if d.dot(nrm) < 0.0 {
-                d = -d;
-            }
-            Ray::new(p + nrm * scale * 1e-5, (d + nrm).normalize_or(nrm))
-        })
-        .collect()
 }
 
 fn count(hits: &[Option<Hit>]) -> usize {

@@ -11,8 +11,12 @@
 //!
 //! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree).
 
+#[path = "common/mod.rs"]
+mod common;
 #[path = "peers/mod.rs"]
 mod peers;
+
+use common::{BvhCrateTri, diffuse_rays, surface_points};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -24,28 +28,6 @@ use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
 use strahl::traverse::Moller;
 use strahl::{Aabb, Ray, Vec3};
-
-struct BvhCrateTri {
-    a: nalgebra::Point3<f32>,
-    b: nalgebra::Point3<f32>,
-    c: nalgebra::Point3<f32>,
-    node: usize,
-}
-
-impl bvh::aabb::Bounded<f32, 3> for BvhCrateTri {
-    fn aabb(&self) -> bvh::aabb::Aabb<f32, 3> {
-        bvh::aabb::Aabb::empty().grow(&self.a).grow(&self.b).grow(&self.c)
-    }
-}
-
-impl bvh::bounding_hierarchy::BHShape<f32, 3> for BvhCrateTri {
-    fn set_bh_node_index(&mut self, i: usize) {
-        self.node = i;
-    }
-    fn bh_node_index(&self) -> usize {
-        self.node
-    }
-}
 
 struct Contenders {
     tris: Vec<Triangle>,
@@ -132,36 +114,6 @@ fn primary_rays(b: &Aabb, w: u32, h: u32) -> Vec<Ray> {
             let u = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
             let v = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
             Ray::new(eye, fw + right * u + up * v)
-        })
-        .collect()
-}
-
-/// `n` random points on the surface with their (geometric) normals.
-fn surface_points(tris: &[Triangle], n: usize, rng: &mut Rng) -> Vec<(Vec3, Vec3)> {
-    (0..n)
-        .filter_map(|_| {
-            let t = tris[(rng.u64() % tris.len() as u64) as usize];
-            let (mut u, mut v) = (rng.f32(), rng.f32());
-            if u + v > 1.0 {
-                (u, v) = (1.0 - u, 1.0 - v);
-            }
-            let p = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
-            let nrm = (t[1] - t[0]).cross(t[2] - t[0]).try_normalize()?;
-            Some((p, nrm))
-        })
-        .collect()
-}
-
-fn diffuse_rays(tris: &[Triangle], n: usize, scale: f32) -> Vec<Ray> {
-    let mut rng = Rng::new(5);
-    surface_points(tris, n, &mut rng)
-        .into_iter()
-        .map(|(p, nrm)| {
-            let mut d = rng.unit_vector();
-            if d.dot(nrm) < 0.0 {
-                d = -d;
-            }
-            Ray::new(p + nrm * scale * 1e-5, (d + nrm).normalize_or(nrm))
         })
         .collect()
 }

@@ -1,0 +1,62 @@
+//! Scene and ray helpers shared by the bench files (included with
+//! `#[path = "common/mod.rs"] mod common;`), so that every bench traces the same kinds of rays.
+#![allow(dead_code)] // each bench uses a part
+
+use strahl::geometry::Triangle;
+use strahl::scene::Rng;
+use strahl::{Ray, Vec3};
+
+/// `n` random points on the surface with their (geometric) normals.
+pub fn surface_points(tris: &[Triangle], n: usize, rng: &mut Rng) -> Vec<(Vec3, Vec3)> {
+    (0..n)
+        .filter_map(|_| {
+            let t = tris[(rng.u64() % tris.len() as u64) as usize];
+            let (mut u, mut v) = (rng.f32(), rng.f32());
+            if u + v > 1.0 {
+                (u, v) = (1.0 - u, 1.0 - v);
+            }
+            let p = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
+            let nrm = (t[1] - t[0]).cross(t[2] - t[0]).try_normalize()?;
+            Some((p, nrm))
+        })
+        .collect()
+}
+
+/// Rays from `n` random surface points in cosine-like directions around the normal, started
+/// `scale * 1e-5` off the surface.
+pub fn diffuse_rays(tris: &[Triangle], n: usize, scale: f32) -> Vec<Ray> {
+    let mut rng = Rng::new(5);
+    surface_points(tris, n, &mut rng)
+        .into_iter()
+        .map(|(p, nrm)| {
+            let mut d = rng.unit_vector();
+            if d.dot(nrm) < 0.0 {
+                d = -d;
+            }
+            Ray::new(p + nrm * scale * 1e-5, (d + nrm).normalize_or(nrm))
+        })
+        .collect()
+}
+
+/// A triangle for the `bvh` crate (it stores each shape's leaf index in the shape).
+pub struct BvhCrateTri {
+    pub a: nalgebra::Point3<f32>,
+    pub b: nalgebra::Point3<f32>,
+    pub c: nalgebra::Point3<f32>,
+    pub node: usize,
+}
+
+impl bvh::aabb::Bounded<f32, 3> for BvhCrateTri {
+    fn aabb(&self) -> bvh::aabb::Aabb<f32, 3> {
+        bvh::aabb::Aabb::empty().grow(&self.a).grow(&self.b).grow(&self.c)
+    }
+}
+
+impl bvh::bounding_hierarchy::BHShape<f32, 3> for BvhCrateTri {
+    fn set_bh_node_index(&mut self, i: usize) {
+        self.node = i;
+    }
+    fn bh_node_index(&self) -> usize {
+        self.node
+    }
+}
