@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{bounds, mixed_rays};
+use common::{bounds, mixed_rays, same};
 use proptest::prelude::*;
 use std::sync::OnceLock;
 use strahl::build::{BuildParams, Bvh2};
@@ -53,29 +53,6 @@ fn camera_rays(tris: &[Triangle], shape: TileShape, w: u32, h: u32) -> Vec<Ray> 
         Ray::new(eye, Vec3::new(s(x), s(y), -1.0))
     }));
     rays
-}
-
-fn same(a: Option<Hit>, b: Option<Hit>, tris: &[Triangle], ray: &Ray, what: &str) {
-    match (a, b) {
-        (None, None) => {}
-        (Some(x), Some(y)) if x.t.to_bits() == y.t.to_bits() => {
-            if x.prim != y.prim {
-                // A tie: both triangles must be hit at exactly this t.
-                let r = strahl::intersect::PreparedRay::new(ray);
-                let t = |p: u32| strahl::intersect::watertight::intersect_scalar(&r, &tris[p as usize], p).map(|h| h.t);
-                let m = |p: u32| strahl::intersect::moller::intersect_scalar(&r, &tris[p as usize], p).map(|h| h.t);
-                assert!(
-                    (t(x.prim) == Some(x.t) || m(x.prim) == Some(x.t))
-                        && (t(y.prim) == Some(y.t) || m(y.prim) == Some(y.t)),
-                    "{what}: different primitives {} and {} at t {}",
-                    x.prim,
-                    y.prim,
-                    x.t
-                );
-            }
-        }
-        _ => panic!("{what}: packet {a:?} vs single {b:?} for {ray:?}"),
-    }
 }
 
 /// A marker that the kernels never write (a lane past the slice must keep it).

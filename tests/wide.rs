@@ -4,36 +4,13 @@
 
 mod common;
 
-use common::mixed_rays as rays;
+use common::{mixed_rays as rays, same};
 use strahl::build::{BuildParams, Bvh2};
-use strahl::geometry::{Hit, Triangle};
+use strahl::geometry::Triangle;
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
 use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_brute_force, occluded_brute_force};
 use strahl::{Ray, Vec3};
-
-fn same(a: Option<Hit>, b: Option<Hit>, tris: &[Triangle], ray: &Ray, what: &str) {
-    match (a, b) {
-        (None, None) => {}
-        (Some(x), Some(y)) if x.t.to_bits() == y.t.to_bits() => {
-            if x.prim != y.prim {
-                // A tie: both triangles must be hit at exactly this t.
-                let r = strahl::intersect::PreparedRay::new(ray);
-                let t = |p: u32| strahl::intersect::watertight::intersect_scalar(&r, &tris[p as usize], p).map(|h| h.t);
-                let m = |p: u32| strahl::intersect::moller::intersect_scalar(&r, &tris[p as usize], p).map(|h| h.t);
-                assert!(
-                    (t(x.prim) == Some(x.t) || m(x.prim) == Some(x.t))
-                        && (t(y.prim) == Some(y.t) || m(y.prim) == Some(y.t)),
-                    "{what}: different primitives {} and {} at t {}",
-                    x.prim,
-                    y.prim,
-                    x.t
-                );
-            }
-        }
-        _ => panic!("{what}: {a:?} vs {b:?} for {ray:?}"),
-    }
-}
 
 fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
     let rays = rays(tris, n_rays, 7);

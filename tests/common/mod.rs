@@ -12,7 +12,7 @@
 #![allow(dead_code)]
 
 use proptest::prelude::*;
-use strahl::geometry::Triangle;
+use strahl::geometry::{Hit, Triangle};
 use strahl::scene::Rng;
 use strahl::{Ray, Vec3};
 
@@ -117,4 +117,29 @@ pub fn mixed_rays(tris: &[Triangle], n: usize, seed: u64) -> Vec<Ray> {
     out.push(Ray::new(Vec3::splat(f32::INFINITY), Vec3::X));
     out.push(Ray::with_range(lo, hi - lo, 1.0, 0.5));
     out
+}
+
+/// `a` and `b` are the same closest hit: the same `t` bits, and the same primitive unless both
+/// primitives are hit at exactly that `t` (a tie).
+pub fn same(a: Option<Hit>, b: Option<Hit>, tris: &[Triangle], ray: &Ray, what: &str) {
+    match (a, b) {
+        (None, None) => {}
+        (Some(x), Some(y)) if x.t.to_bits() == y.t.to_bits() => {
+            if x.prim != y.prim {
+                // A tie: both triangles must be hit at exactly this t.
+                let r = strahl::intersect::PreparedRay::new(ray);
+                let t = |p: u32| strahl::intersect::watertight::intersect_scalar(&r, &tris[p as usize], p).map(|h| h.t);
+                let m = |p: u32| strahl::intersect::moller::intersect_scalar(&r, &tris[p as usize], p).map(|h| h.t);
+                assert!(
+                    (t(x.prim) == Some(x.t) || m(x.prim) == Some(x.t))
+                        && (t(y.prim) == Some(y.t) || m(y.prim) == Some(y.t)),
+                    "{what}: different primitives {} and {} at t {}",
+                    x.prim,
+                    y.prim,
+                    x.t
+                );
+            }
+        }
+        _ => panic!("{what}: {a:?} vs {b:?} for {ray:?}"),
+    }
 }
