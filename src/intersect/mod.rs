@@ -10,6 +10,11 @@
 //! | slab test ([`aabb`]) | [`intersect_aabb_scalar`] | [`intersect_aabb_x4`] | [`intersect_aabb_x8`] | |
 //! | Möller-Trumbore ([`moller`]) | [`moller::intersect_scalar`] | [`moller::intersect_x4`] | [`moller::intersect_x8`] | [`moller::intersect_packet`] |
 //! | watertight ([`watertight`]) | [`watertight::intersect_scalar`] | [`watertight::intersect_x4`] | [`watertight::intersect_x8`] | [`watertight::intersect_packet`] |
+//! | `f64` references and bounds ([`reference`](mod@reference)) | [`reference::intersect_triangle_f64`], [`reference::intersect_aabb_f64`] | | | |
+//!
+//! [`reference`](mod@reference) holds `f64` references for the triangle and box tests, and the error bounds that
+//! say when an `f32` answer must agree with them (every reported hit is checked against them in
+//! `tests/f64_reference.rs`).
 //!
 //! Every SIMD kernel performs the same IEEE operations in the same order as its scalar reference
 //! (no fused multiply-add anywhere), so hit/miss, primitive and `t`, `u`, `v` agree **exactly**
@@ -33,6 +38,7 @@
 pub mod aabb;
 pub mod moller;
 mod packet;
+pub mod reference;
 mod soa;
 pub mod watertight;
 
