@@ -647,10 +647,11 @@ mod tests {
     #[test]
     fn x8_corners_equal_scalar_on_every_small_shape() {
         fn check<V: Voxel>(make: impl Fn(u32) -> V) {
-            let sizes = [1u32, 2, 3, 5];
-            for &nx in &sizes {
-                for &ny in &sizes {
-                    for &nz in &sizes {
+            // Under miri (which checks the gathers' memory accesses) a reduced set of shapes.
+            let sizes: &[u32] = if cfg!(miri) { &[1, 3] } else { &[1, 2, 3, 5] };
+            for &nx in sizes {
+                for &ny in sizes {
+                    for &nz in sizes {
                         let n = (nx * ny * nz) as usize;
                         let data: Vec<V> = (0..n as u32)
                             .map(|i| make(i.wrapping_mul(2_654_435_761) >> 7))
