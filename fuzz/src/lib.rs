@@ -5,7 +5,9 @@
 //! its scalar reference lane by lane (bit for bit), every closest hit with brute force over the
 //! scalar references, the documented bad-input policies, and, on grid inputs, everything with
 //! exact arithmetic ([`exact`]). Later targets (builders, traversal) reuse the decoder, the
-//! brute-force references and the exact tests.
+//! brute-force references and the exact tests; the [`volume`] and [`composite`] targets reuse the
+//! value decoder and bring their own checkers (x8 marcher against the scalar one, skipping against
+//! no skipping, every compositing schedule against the serial reference).
 //!
 //! Two input modes, selected by bit 0 of the first byte:
 //! - **chaos**: coordinates are arbitrary `f32` bit patterns (NaN, infinities, subnormals, `-0`,
@@ -22,9 +24,13 @@
 
 pub mod bvh;
 pub mod check;
+pub mod composite;
 pub mod decode;
 pub mod exact;
+pub mod volume;
 
 pub use bvh::{BvhCase, check_bvh};
 pub use check::{Kernel, brute_force_closest, check_kernels, same_hit};
+pub use composite::{CompositeCase, CompositeReport, check_composite};
 pub use decode::{Input, KernelCase, Mode};
+pub use volume::{VolumeCase, VolumeReport, check_volume};

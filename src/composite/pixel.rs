@@ -42,8 +42,12 @@ pub trait Pixel: Pod + PartialEq + Send + Sync + core::fmt::Debug + 'static {
 pub struct RgbaF32(pub [f32; 4]);
 
 /// A premultiplied RGBA pixel with `u8` channels.
+///
+/// Aligned like a `u32`: the over kernels work on the four channels as one word, so slices of
+/// `Rgba8` (the empty ones included) are cast to `u32` slices, which needs 4-byte alignment.
+/// Byte buffers cast to `&[Rgba8]` must be 4-aligned too.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Pod, Zeroable)]
-#[repr(C)]
+#[repr(C, align(4))]
 pub struct Rgba8(pub [u8; 4]);
 
 /// A depth sample: depth and an RGBA8 colour packed into one totally ordered `u64` key.
@@ -63,7 +67,7 @@ pub struct Rgba8(pub [u8; 4]);
 pub struct DepthPixel(pub u64);
 
 const _: () = assert!(core::mem::size_of::<RgbaF32>() == 16);
-const _: () = assert!(core::mem::size_of::<Rgba8>() == 4);
+const _: () = assert!(core::mem::size_of::<Rgba8>() == 4 && core::mem::align_of::<Rgba8>() == 4);
 const _: () = assert!(core::mem::size_of::<DepthPixel>() == 8);
 
 impl DepthPixel {
@@ -290,6 +294,19 @@ mod tests {
             let c = |r: &mut Self| ((r.next() & 0xff) as u32 * a) / 255;
             c(self) | c(self) << 8 | c(self) << 16 | a << 24
         }
+    }
+
+    /// Found by the `composite` fuzz target: `Rgba8` had alignment 1, so casting an empty
+    /// `Vec<Rgba8>` (dangling pointer 0x1) or a misaligned slice to `u32` panicked.
+    #[test]
+    fn empty_and_vec_rgba8_slices_composite() {
+        let mut empty: Vec<Rgba8> = Vec::new();
+        Rgba8::composite_behind(&mut empty, &[]);
+        Rgba8::composite_in_front(&mut empty, &[]);
+        let mut v: Vec<Rgba8> = (0..9).map(|i| Rgba8([i, i, i, 255])).collect();
+        let back = [Rgba8([1, 2, 3, 4]); 9];
+        Rgba8::composite_behind(&mut v[1..], &back[1..]);
+        assert_eq!(v[1], Rgba8([1, 1, 1, 255])); // opaque front wins
     }
 
     #[test]

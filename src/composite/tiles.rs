@@ -38,8 +38,10 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
             v.push(Tile {
                 x0,
                 y0,
-                x1: (x0 + size).min(width),
-                y1: (y0 + size).min(height),
+                // NOTE: saturating, so that a tile at the far edge of a `u32::MAX`-wide image
+                // does not wrap around.
+                x1: x0.saturating_add(size).min(width),
+                y1: y0.saturating_add(size).min(height),
             });
         }
     }
@@ -162,4 +164,19 @@ where
         }
     }
     (img, stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Found by the `composite` fuzz target: `x0 + size` overflowed at the far edge of a
+    /// `u32::MAX`-wide image (a panic in debug builds, a tile with `x1 < x0` in release ones).
+    #[test]
+    fn tiles_at_the_edge_of_u32_do_not_wrap() {
+        let t = tiles(u32::MAX, 1, 0x8000_0000);
+        assert_eq!(t.len(), 2);
+        assert_eq!((t[1].x0, t[1].x1, t[1].y1), (0x8000_0000, u32::MAX, 1));
+        assert!(t.iter().all(|t| t.x0 < t.x1 && t.y0 < t.y1));
+    }
 }
