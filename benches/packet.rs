@@ -20,10 +20,11 @@ mod common;
 #[path = "peers/mod.rs"]
 mod peers;
 
-use common::diffuse_rays;
+use common::{bounds, diffuse_rays, primary_rays};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
+use strahl::Ray;
 use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::{Hit, Triangle};
 use strahl::layout::Bvh8;
@@ -31,34 +32,11 @@ use strahl::math::{f32x4, f32x8};
 use strahl::scene;
 use strahl::traverse::Moller;
 use strahl::traverse::packet::{self, TileShape, f32x16};
-use strahl::{Aabb, Ray, Vec3};
 
 struct Contenders {
     tris: Vec<Triangle>,
     bvh2: Bvh2,
     bvh8: Bvh8,
-}
-
-fn bounds(tris: &[Triangle]) -> Aabb {
-    tris.iter().flatten().fold(Aabb::EMPTY, |mut b, v| {
-        b.grow(*v);
-        b
-    })
-}
-
-/// The camera of `benches/trace.rs`, its pixels in tiles of `shape`.
-fn primary_rays(b: &Aabb, w: u32, h: u32, shape: TileShape) -> Vec<Ray> {
-    let c = b.centroid();
-    let r = (b.max - b.min).length() * 0.5;
-    let eye = c + Vec3::new(0.55, 0.35, 1.0).normalize() * r * 2.6;
-    let fw = (c - eye).normalize();
-    let right = fw.cross(Vec3::Y).normalize() * 0.45;
-    let up = right.normalize().cross(fw) * 0.45;
-    packet::image_rays(shape, w, h, |x, y| {
-        let u = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
-        let v = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
-        Ray::new(eye, fw + right * u + up * v)
-    })
 }
 
 fn count(hits: &[Option<Hit>]) -> usize {

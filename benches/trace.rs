@@ -16,7 +16,7 @@ mod common;
 #[path = "peers/mod.rs"]
 mod peers;
 
-use common::{BvhCrateTri, diffuse_rays, surface_points};
+use common::{BvhCrateTri, bounds, diffuse_rays, primary_rays, surface_points};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -27,6 +27,7 @@ use strahl::intersect::{PreparedRay, moller};
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
 use strahl::traverse::Moller;
+use strahl::traverse::packet::TileShape;
 use strahl::{Aabb, Ray, Vec3};
 
 struct Contenders {
@@ -89,33 +90,6 @@ fn build(tris: Vec<Triangle>) -> Contenders {
         peer_bvh_shapes,
         obvhs,
     }
-}
-
-fn bounds(tris: &[Triangle]) -> Aabb {
-    tris.iter().flatten().fold(Aabb::EMPTY, |mut b, v| {
-        b.grow(*v);
-        b
-    })
-}
-
-fn primary_rays(b: &Aabb, w: u32, h: u32) -> Vec<Ray> {
-    let c = b.centroid();
-    let r = (b.max - b.min).length() * 0.5;
-    let eye = c + Vec3::new(0.55, 0.35, 1.0).normalize() * r * 2.6;
-    let fw = (c - eye).normalize();
-    let right = fw.cross(Vec3::Y).normalize() * 0.45;
-    let up = right.normalize().cross(fw) * 0.45;
-    // In 4 x 2 pixel blocks, so that packets of 8 consecutive rays are coherent tiles.
-    (0..w * h)
-        .map(|i| {
-            let (block, j) = (i / 8, i % 8);
-            let (bx, by) = (block % (w / 4), block / (w / 4));
-            let (x, y) = (bx * 4 + j % 4, by * 2 + j / 4);
-            let u = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
-            let v = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
-            Ray::new(eye, fw + right * u + up * v)
-        })
-        .collect()
 }
 
 fn shadow_rays(tris: &[Triangle], b: &Aabb, n: usize, scale: f32) -> Vec<Ray> {
@@ -272,7 +246,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
     let b = bounds(&c.tris);
     let scale = (b.max - b.min).length();
     let kinds: [(&str, Vec<Ray>, bool); 3] = [
-        ("primary", primary_rays(&b, 1024, 1024), false),
+        ("primary", primary_rays(&b, 1024, 1024, TileShape::X4_2), false),
         ("diffuse", diffuse_rays(&c.tris, 1 << 18, scale), false),
         ("shadow", shadow_rays(&c.tris, &b, 1 << 18, scale), true),
     ];

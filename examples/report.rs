@@ -23,6 +23,7 @@
 
 #[path = "../benches/common/mod.rs"]
 mod common;
+use common::{bounds, primary_rays};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -37,7 +38,8 @@ use strahl::intersect::reference::{Verdict, classify_triangle, crossing_f64};
 use strahl::intersect::{PreparedRay, TriangleX8, moller, watertight};
 use strahl::layout::Bvh8;
 use strahl::scene::{self, Aim, Rng};
-use strahl::traverse::{Moller, STACK_SIZE, Watertight, intersect_scalar, packet};
+use strahl::traverse::packet::{self, TileShape};
+use strahl::traverse::{Moller, STACK_SIZE, Watertight, intersect_scalar};
 use strahl::volume::procedural::{marschner_lobb, pinhole_rays, torus, unit_volume};
 use strahl::volume::*;
 use strahl::{Aabb, Hit, Ray, Vec3};
@@ -359,34 +361,6 @@ fn write_plot(dir: &Path, name: &str, title: &str, cols: usize, size: (u32, u32)
 // ---------------------------------------------------------------------------------------------
 // Scenes and rays (as in benches/trace.rs and benches/build.rs)
 
-fn bounds(tris: &[Triangle]) -> Aabb {
-    tris.iter().flatten().fold(Aabb::EMPTY, |mut b, v| {
-        b.grow(*v);
-        b
-    })
-}
-
-/// A pinhole camera looking at `b` from above one corner, `w x h` rays in 4 x 2 pixel blocks (so
-/// that 8 consecutive rays are a coherent tile), as `benches/trace.rs` makes them.
-fn primary_rays(b: &Aabb, w: u32, h: u32) -> Vec<Ray> {
-    let c = b.centroid();
-    let r = (b.max - b.min).length() * 0.5;
-    let eye = c + Vec3::new(0.55, 0.35, 1.0).normalize() * r * 2.6;
-    let fw = (c - eye).normalize();
-    let right = fw.cross(Vec3::Y).normalize() * 0.45;
-    let up = right.normalize().cross(fw) * 0.45;
-    (0..w * h)
-        .map(|i| {
-            let (block, j) = (i / 8, i % 8);
-            let (bx, by) = (block % (w / 4), block / (w / 4));
-            let (x, y) = (bx * 4 + j % 4, by * 2 + j / 4);
-            let u = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
-            let v = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
-            Ray::new(eye, fw + right * u + up * v)
-        })
-        .collect()
-}
-
 struct TraceScene {
     name: String,
     about: String,
@@ -403,7 +377,7 @@ impl TraceScene {
     fn new(name: &str, about: String, tris: Vec<Triangle>, target: Option<Aabb>, side: u32) -> Self {
         let b = bounds(&tris);
         let scale = (b.max - b.min).length();
-        let primary = primary_rays(&target.unwrap_or(b), side, side);
+        let primary = primary_rays(&target.unwrap_or(b), side, side, TileShape::X4_2);
         let diffuse = common::diffuse_rays(&tris, (side * side) as usize, scale);
         Self {
             name: name.into(),

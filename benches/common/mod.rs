@@ -4,7 +4,33 @@
 
 use strahl::geometry::Triangle;
 use strahl::scene::Rng;
-use strahl::{Ray, Vec3};
+use strahl::traverse::packet::{self, TileShape};
+use strahl::{Aabb, Ray, Vec3};
+
+/// The box around every vertex of `tris`.
+pub fn bounds(tris: &[Triangle]) -> Aabb {
+    tris.iter().flatten().fold(Aabb::EMPTY, |mut b, v| {
+        b.grow(*v);
+        b
+    })
+}
+
+/// The benches' pinhole camera: looking at `b` from above one corner, `w x h` rays, the pixels in
+/// tiles of `shape` ([`packet::image_rays`]), so that each packet of `shape.rays()` consecutive
+/// rays is a coherent tile (single-ray benches use 4 x 2 tiles too, for the same ray order).
+pub fn primary_rays(b: &Aabb, w: u32, h: u32, shape: TileShape) -> Vec<Ray> {
+    let c = b.centroid();
+    let r = (b.max - b.min).length() * 0.5;
+    let eye = c + Vec3::new(0.55, 0.35, 1.0).normalize() * r * 2.6;
+    let fw = (c - eye).normalize();
+    let right = fw.cross(Vec3::Y).normalize() * 0.45;
+    let up = right.normalize().cross(fw) * 0.45;
+    packet::image_rays(shape, w, h, |x, y| {
+        let u = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
+        let v = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
+        Ray::new(eye, fw + right * u + up * v)
+    })
+}
 
 /// `n` random points on the surface with their (geometric) normals.
 pub fn surface_points(tris: &[Triangle], n: usize, rng: &mut Rng) -> Vec<(Vec3, Vec3)> {
