@@ -1,0 +1,107 @@
+//! Packet-speed harness (ignored: run by hand): single-ray BVH8, pure packets of 4/8/16 rays and
+//! the default hybrids, on the bunny and a 262k-triangle sphereflake, primary (512 x 512 camera in
+//! tiles) and diffuse rays, the same rays as `benches/packet.rs`.
+//!
+//! `cargo test --release --test packet_speed -- --ignored --nocapture`: the members take turns
+//! for 8 rounds and each keeps its best time, which holds up better on a shared, noisy machine
+//! than medians taken minutes apart (the criterion bench's ratios moved by 20% between runs here).
+
+#[path = "../benches/common/mod.rs"]
+mod common;
+use std::hint::black_box;
+use std::time::Instant;
+use strahl::build::{BuildParams, Bvh2};
+use strahl::layout::Bvh8;
+use strahl::math::{f32x4, f32x8};
+use strahl::traverse::Moller;
+use strahl::traverse::packet::{self, TileShape, f32x16};
+
+/// Best wall time of `reps` runs of `f`, in milliseconds.
+fn min_ms(reps: usize, mut f: impl FnMut()) -> f64 {
+    (0..reps)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64() * 1e3
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+#[test]
+#[ignore]
+fn speed() {
+    for big in [false, true] {
+        speed_on(big);
+    }
+}
+
+fn speed_on(big: bool) {
+    let tris = if big {
+        strahl::scene::sphereflake(3, 2).to_soup()
+    } else {
+        strahl::scene::bunny().to_soup()
+    };
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    let b = common::bounds(&tris);
+    let diffuse = common::diffuse_rays(&tris, 1 << 17, (b.max - b.min).length());
+    for kind in ["primary", "diffuse"] {
+        let rays = |k: usize| {
+            if kind == "primary" {
+                common::primary_rays(&b, 512, 512, TileShape::for_rays(k))
+            } else {
+                diffuse.clone()
+            }
+        };
+        let (r4, r8, r16) = (rays(4), rays(8), rays(16));
+        let mut hits = vec![None; r16.len()];
+        let mut t = [f64::INFINITY; 7];
+        let reps = if big { 1 } else { 3 };
+        for _ in 0..8 {
+            t[0] = t[0].min(min_ms(reps, || b8.intersect_batch::<Moller>(black_box(&r8), &mut hits)));
+            t[1] = t[1].min(min_ms(reps, || {
+                packet::intersect_batch_packets::<Moller, _, 8, f32x4, 4>(b8.view(), black_box(&r4), &mut hits, 0)
+            }));
+            t[2] = t[2].min(min_ms(reps, || {
+                packet::intersect_batch_packets::<Moller, _, 8, f32x8, 8>(b8.view(), black_box(&r8), &mut hits, 0)
+            }));
+            t[3] = t[3].min(min_ms(reps, || {
+                packet::intersect_batch_packets::<Moller, _, 8, f32x16, 16>(b8.view(), black_box(&r16), &mut hits, 0)
+            }));
+            t[4] = t[4].min(min_ms(reps, || {
+                packet::intersect_batch_packets::<Moller, _, 8, f32x4, 4>(
+                    b8.view(),
+                    black_box(&r4),
+                    &mut hits,
+                    packet::default_switch(4),
+                )
+            }));
+            t[5] = t[5].min(min_ms(reps, || {
+                packet::intersect_batch_packets::<Moller, _, 8, f32x8, 8>(
+                    b8.view(),
+                    black_box(&r8),
+                    &mut hits,
+                    packet::default_switch(8),
+                )
+            }));
+            t[6] = t[6].min(min_ms(reps, || {
+                packet::intersect_batch_packets::<Moller, _, 8, f32x16, 16>(
+                    b8.view(),
+                    black_box(&r16),
+                    &mut hits,
+                    packet::default_switch(16),
+                )
+            }));
+        }
+        let s = t[0];
+        println!(
+            "{} {kind}: single {s:.2} ms | packet4 {:.2}x packet8 {:.2}x packet16 {:.2}x | hybrid4 {:.2}x hybrid8 {:.2}x hybrid16 {:.2}x (speed vs single, best of 8 rounds)",
+            if big { "sphereflake" } else { "bunny" },
+            s / t[1],
+            s / t[2],
+            s / t[3],
+            s / t[4],
+            s / t[5],
+            s / t[6]
+        );
+    }
+}
