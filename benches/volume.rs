@@ -14,6 +14,10 @@
 //!
 //! `cargo bench --bench volume -- --warm-up-time 1 --measurement-time 3`
 
+#[path = "common/mod.rs"]
+mod common;
+
+use common::{quantise, ramp};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use plotters::prelude::*;
 use std::hint::black_box;
@@ -24,23 +28,6 @@ use strahl::{Ray, Vec3};
 
 const N: u32 = 128;
 const IMG: u32 = 96;
-
-/// A colour ramp with extinction growing with the value; `lo..hi` of the 8-bit range is visible.
-fn ramp(lo: usize, hi: usize, gain: f32) -> Vec<TfEntry> {
-    (0..256)
-        .map(|i| {
-            if i < lo || i > hi {
-                return TfEntry::TRANSPARENT;
-            }
-            let t = (i - lo) as f32 / (hi - lo).max(1) as f32;
-            TfEntry::new([0.9 * t + 0.1, 0.4 + 0.3 * t, 1.0 - 0.8 * t], gain * (0.2 + t))
-        })
-        .collect()
-}
-
-fn quantise(v: &[f32]) -> Vec<u8> {
-    v.iter().map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8).collect()
-}
 
 fn camera() -> Vec<Ray> {
     pinhole_rays(Vec3::new(2.2, -2.9, 1.6), Vec3::ZERO, 36.0, IMG, IMG)

@@ -23,7 +23,7 @@
 
 #[path = "../benches/common/mod.rs"]
 mod common;
-use common::{bounds, primary_rays};
+use common::{bounds, primary_rays, quantise, ramp};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -1463,23 +1463,6 @@ fn section_volume_steps(dir: &Path) -> Res<String> {
 
 // ---------------------------------------------------------------------------------------------
 // 5. Early ray termination
-
-/// `benches/volume.rs`' colour ramp: values `lo..=hi` visible, extinction growing with the value.
-fn ramp(lo: usize, hi: usize, gain: f32) -> Vec<TfEntry> {
-    (0..256)
-        .map(|i| {
-            if i < lo || i > hi {
-                return TfEntry::TRANSPARENT;
-            }
-            let t = (i - lo) as f32 / (hi - lo).max(1) as f32;
-            TfEntry::new([0.9 * t + 0.1, 0.4 + 0.3 * t, 1.0 - 0.8 * t], gain * (0.2 + t))
-        })
-        .collect()
-}
-
-fn quantise(v: &[f32]) -> Vec<u8> {
-    v.iter().map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8).collect()
-}
 
 fn camera(side: u32) -> Vec<Ray> {
     pinhole_rays(Vec3::new(2.2, -2.9, 1.6), Vec3::ZERO, 36.0, side, side)

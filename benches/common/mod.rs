@@ -5,6 +5,7 @@
 use strahl::geometry::Triangle;
 use strahl::scene::Rng;
 use strahl::traverse::packet::{self, TileShape};
+use strahl::volume::TfEntry;
 use strahl::{Aabb, Ray, Vec3};
 
 /// The box around every vertex of `tris`.
@@ -85,4 +86,23 @@ impl bvh::bounding_hierarchy::BHShape<f32, 3> for BvhCrateTri {
     fn bh_node_index(&self) -> usize {
         self.node
     }
+}
+
+/// The volume benches' colour ramp over the 8-bit range: values `lo..=hi` visible, extinction
+/// growing with the value (`gain * (0.2 + t)`), transparent elsewhere.
+pub fn ramp(lo: usize, hi: usize, gain: f32) -> Vec<TfEntry> {
+    (0..256)
+        .map(|i| {
+            if i < lo || i > hi {
+                return TfEntry::TRANSPARENT;
+            }
+            let t = (i - lo) as f32 / (hi - lo).max(1) as f32;
+            TfEntry::new([0.9 * t + 0.1, 0.4 + 0.3 * t, 1.0 - 0.8 * t], gain * (0.2 + t))
+        })
+        .collect()
+}
+
+/// Values in `[0, 1]` as `u8` voxels (rounded, clamped).
+pub fn quantise(v: &[f32]) -> Vec<u8> {
+    v.iter().map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8).collect()
 }

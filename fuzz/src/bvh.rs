@@ -45,7 +45,7 @@ impl BvhCase {
     pub fn decode(data: &[u8]) -> Self {
         let mut inp = Input::new(data);
         let h = inp.byte();
-        let mode = if h & 1 == 1 { Mode::Grid } else { Mode::Chaos };
+        let mode = Mode::of_header(h);
         let groups = usize::from(h >> 2 & 3) + 1;
         let mut tris = Vec::new();
         for _ in 0..groups {

@@ -131,7 +131,7 @@ impl CompositeCase {
     pub fn decode(data: &[u8]) -> Self {
         let mut inp = Input::new(data);
         let h = inp.byte();
-        let mode = if h & 1 == 1 { Mode::Grid } else { Mode::Chaos };
+        let mode = Mode::of_header(h);
         let grid = mode == Mode::Grid;
         let kind = (h >> 1) & 3;
         let sparse = h & 8 != 0;

@@ -92,6 +92,13 @@ pub enum Mode {
     Grid,
 }
 
+impl Mode {
+    /// The mode every target reads from bit 0 of its first byte (1: grid).
+    pub fn of_header(header: u8) -> Self {
+        if header & 1 == 0 { Self::Chaos } else { Self::Grid }
+    }
+}
+
 /// A byte reader that yields zeros past the end.
 #[derive(Clone, Debug)]
 pub struct Input<'a> {
@@ -236,7 +243,7 @@ impl KernelCase {
     pub fn decode(data: &[u8]) -> Self {
         let mut inp = Input::new(data);
         let header = inp.byte();
-        let mode = if header & 1 == 0 { Mode::Chaos } else { Mode::Grid };
+        let mode = Mode::of_header(header);
         let aim = header & 2 != 0;
         let neg_zero = header & 4 != 0;
         let tris: [Triangle; 8] = inp.triangles(mode);
