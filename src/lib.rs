@@ -38,6 +38,7 @@
 //! | (none) | | all kernels: slab test, triangle tests, Morton codes, volume marching, on caller-provided slices; `#![no_std]`, no allocation |
 //! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); [`volume::MacrocellGrid::build`] in a `Vec`; [`build`] (BVH2 builders, reusable [`build::Builder`] memory) |
 //! | `std` | yes | `alloc`, plus std's float intrinsics in `glam`; threads ([`composite::ThreadTransport`], [`composite::render_tiles`]) |
+//! | `hugepages` | yes | `std`; on Linux, [`layout::Bvh4`]/[`layout::Bvh8`] arrays of 4 MiB and more advised for transparent huge pages (`madvise`, through `libc`): fewer TLB misses on large trees, same results |
 //! | `mpi` | | [`composite`]'s `MpiTransport` over the system's MPI library (`libopenmpi-dev`, `libclang-dev`) |
 //!
 //! ## Where the tunables live

@@ -254,9 +254,11 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         if !bvh.nodes.is_empty() {
             b.run(0)?;
         }
+        // PERF: large trees on transparent huge pages (feature `hugepages`, Linux; see
+        // `layout::pages`): fewer TLB misses in traversal, results unchanged.
         Ok(Self {
-            nodes: b.nodes,
-            packs: b.packs,
+            nodes: super::pages::to_huge_pages(b.nodes),
+            packs: super::pages::to_huge_pages(b.packs),
             depth: b.depth,
         })
     }

@@ -22,6 +22,8 @@
 
 #[cfg(feature = "alloc")]
 mod collapse;
+#[cfg(feature = "alloc")]
+mod pages;
 
 use crate::intersect::{AabbLanes, TriangleLanes};
 use crate::math::{Lane, f32x4, f32x8};
@@ -99,6 +101,11 @@ pub type Bvh8Ref<'a> = BvhWideRef<'a, f32x8, 8>;
 ///
 /// The fields are private so that every value keeps the invariants traversal is exact under:
 /// every code in range and the depth within [`MAX_WIDE_DEPTH`].
+///
+/// With the `hugepages` feature (default) on Linux, [`from_bvh2`](Self::from_bvh2) moves node and
+/// pack arrays of 4 MiB or more into memory advised for transparent huge pages, as Embree does
+/// with its trees (measured: about 1.2x on 1M-triangle scenes, where nearly every node read
+/// missed the TLB). A hint only; a `clone` is an ordinary allocation.
 #[cfg(feature = "alloc")]
 #[derive(Clone, Debug)]
 pub struct BvhWide<L, const N: usize> {

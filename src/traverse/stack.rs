@@ -51,6 +51,18 @@ impl<const S: usize> Stack<S> {
         true
     }
 
+    /// Pushes an entry on top. Returns `false` when full.
+    #[inline(always)]
+    pub(crate) fn push(&mut self, code: u32, dist: f32) -> bool {
+        if self.len >= S {
+            return false;
+        }
+        self.codes[self.len] = MaybeUninit::new(code);
+        self.dists[self.len] = MaybeUninit::new(dist);
+        self.len += 1;
+        true
+    }
+
     #[inline(always)]
     fn dist(&self, i: usize) -> f32 {
         debug_assert!(i < self.len);
@@ -96,6 +108,10 @@ mod tests {
             assert!(s.push_sorted(0, i, i as f32));
         }
         assert!(!s.push_sorted(0, 99, 0.0)); // full
+        assert!(!s.push(99, 0.0)); // full
         assert_eq!(s.pop(), Some((0, 0.0)));
+        assert!(s.push(42, -1.0)); // on top, whatever its distance
+        assert_eq!(s.pop(), Some((42, -1.0)));
+        assert_eq!(s.pop(), Some((1, 1.0)));
     }
 }

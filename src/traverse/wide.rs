@@ -24,6 +24,40 @@ fn beyond(tnear: f32, tmax: f32) -> bool {
     tnear > tmax + abs(tmax) * FAR_SLACK
 }
 
+/// Asks the cache for child `code` (an interior node, or the first 384 bytes of a leaf's packs) ahead of its
+/// visit: children pushed now are popped after their siblings' subtrees, by when the lines have
+/// arrived. A hint only (no read happens; x86 only, a no-op elsewhere).
+// PERF: measured on the 1M sphereflake (BVH8, 262k rays, best of 5): see the README's trace
+// section. Trees that fit in the cache gain nothing and lose nothing measurable.
+#[inline(always)]
+pub(crate) fn prefetch<L, const N: usize>(bvh: BvhWideRef<'_, L, N>, code: u32) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let (p, bytes): (*const u8, usize) = if code & LEAF_BIT == 0 {
+            (
+                bvh.nodes.as_ptr().wrapping_add(code as usize).cast(),
+                core::mem::size_of::<crate::layout::WideNode<L, N>>(),
+            )
+        } else {
+            let (first, _) = leaf_packs(code);
+            (
+                bvh.packs.as_ptr().wrapping_add(first).cast(),
+                core::mem::size_of::<crate::intersect::TriangleLanes<L, N>>(),
+            )
+        };
+        let mut off = 0;
+        while off < bytes.min(384) {
+            // SAFETY: SSE is part of every x86_64 target; a prefetch reads nothing and never faults
+            // (`wrapping_add` only computes an address, valid or not).
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(off).cast()) };
+            off += 64;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (bvh, code);
+}
+
 /// Closest hit of `ray` in the wide BVH `bvh`, with the triangle test `T`.
 ///
 /// ```
@@ -78,6 +112,7 @@ pub fn intersect_from<T: TriangleTest, L: Lane, const N: usize>(
                     while mask != 0 {
                         let i = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
+                        prefetch(bvh, node.child[i]);
                         if !stack.push_sorted(base, node.child[i], nears[i]) {
                             // Only trees deeper than MAX_WIDE_DEPTH (never built here) get here.
                             return scan_closest::<T, L, N>(bvh, r);
@@ -124,8 +159,10 @@ pub fn occluded_prepared<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideR
     if r.is_empty() || bvh.nodes.is_empty() {
         return false;
     }
-    // Children are visited near to far here too: shadow rays end at a point on or near a
-    // surface, and the near child is the likelier blocker (measured: 2x on shadow rays).
+    // Children are visited in slot order, not near to far (as Embree's any-hit traversal does):
+    // a shadow ray starts at a surface, and the nearest child is mostly the geometry around its
+    // origin, which it leaves without a hit. Measured on shadow rays to random points (BVH8,
+    // 262k rays, best of 5): 1.3x faster on the 1M sphereflake, the same on the bunny.
     let mut stack = Stack::<STACK>::new();
     let mut cur = 0u32;
     let mut budget = bvh.nodes.len();
@@ -136,19 +173,18 @@ pub fn occluded_prepared<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideR
             }
             budget -= 1;
             if let Some(node) = bvh.nodes.get(cur as usize) {
-                let (near, mut mask) = intersect_aabb_lanes(r, &node.bounds);
+                let (_, mut mask) = intersect_aabb_lanes(r, &node.bounds);
                 if mask != 0 {
                     if mask & (mask - 1) == 0 {
                         cur = node.child[mask.trailing_zeros() as usize];
                         continue;
                     }
-                    let mut nears = [0f32; 8];
-                    near.store(&mut nears);
-                    let base = stack.len();
+                    // The highest slot first, so the lowest is popped first.
                     while mask != 0 {
-                        let i = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        if !stack.push_sorted(base, node.child[i], nears[i]) {
+                        let i = 31 - mask.leading_zeros() as usize;
+                        mask &= !(1 << i);
+                        prefetch(bvh, node.child[i]);
+                        if !stack.push(node.child[i], 0.0) {
                             return bvh.packs.iter().any(|p| T::hit_mask_lanes(r, p) != 0);
                         }
                     }

@@ -315,7 +315,7 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
 }
 
 /// Any hit of the prepared ray `r` in the subtree below child code `start` (`0`: the whole
-/// tree), for the hybrid's single rays; the same loop as
+/// tree), for the hybrid's single rays; the same loop and child order as
 /// [`wide::occluded_prepared`](crate::traverse::wide::occluded_prepared).
 fn occluded_from<T: TriangleTest, L: Lane, const N: usize>(
     bvh: BvhWideRef<'_, L, N>,
@@ -339,19 +339,18 @@ fn occluded_from<T: TriangleTest, L: Lane, const N: usize>(
             }
             budget -= 1;
             if let Some(node) = bvh.nodes.get(cur as usize) {
-                let (near, mut mask) = intersect_aabb_lanes(r, &node.bounds);
+                let (_, mut mask) = intersect_aabb_lanes(r, &node.bounds);
                 if mask != 0 {
                     if mask & (mask - 1) == 0 {
                         cur = node.child[mask.trailing_zeros() as usize];
                         continue;
                     }
-                    let mut nears = [0f32; N];
-                    near.store(&mut nears);
-                    let base = stack.len();
+                    // Slot order, the lowest popped first (see `wide::occluded_prepared`).
                     while mask != 0 {
-                        let i = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        if !stack.push_sorted(base, node.child[i], nears[i]) {
+                        let i = 31 - mask.leading_zeros() as usize;
+                        mask &= !(1 << i);
+                        crate::traverse::wide::prefetch(bvh, node.child[i]);
+                        if !stack.push(node.child[i], 0.0) {
                             return scan(r);
                         }
                     }
@@ -468,6 +467,7 @@ impl<R: Lane, const K: usize> Walk<'_, R, K> {
                         );
                         let hit = hit & mask;
                         if hit != 0 {
+                            crate::traverse::wide::prefetch(bvh, child);
                             // Order children by the nearest entry of any lane.
                             let e = Entry {
                                 code: child,
@@ -682,6 +682,7 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                         if lane_mask == 0 {
                             continue;
                         }
+                        crate::traverse::wide::prefetch(bvh, child);
                         let e = Entry {
                             code: child,
                             dist: nears[i],
