@@ -283,7 +283,7 @@ fn owned_range(s: &Schedule, v: u32, n: u32) -> core::ops::Range<u32> {
     }
 }
 
-/// Measures the [`CostModel`] of this transport (`std`): latency and bandwidth from ping-pongs
+/// Measures the [`CostModel`](super::CostModel) of this transport (`std`): latency and bandwidth from ping-pongs
 /// between ranks 0 and 1 (median of repeats), the blend rate from compositing on this rank; rank
 /// 0's figures are sent to every rank so that all choose the same k-vector. Every rank must call it.
 /// With one rank only the blend rate is measured (messages cost nothing).

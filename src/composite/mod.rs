@@ -12,7 +12,7 @@
 //!   (`alloc`).
 //! - [`exec`]: the executor over a [`Transport`] (`alloc`); [`ThreadTransport`] runs ranks as
 //!   threads (`std`); `MpiTransport` runs them as MPI processes (feature `mpi`).
-//! - [`tiles`]: sort-first dynamic load balancing with a tile queue (`std`).
+//! - [`tiles`](mod@tiles): sort-first dynamic load balancing with a tile queue (`std`).
 //!
 //! ```
 //! use strahl::composite::{KVec, Plan, RgbaF32, Schedule, ThreadTransport, composite};

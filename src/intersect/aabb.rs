@@ -16,7 +16,7 @@
 //!   bit, so both zeros give the same answer: a ray parallel to a slab overlaps it for every `t`
 //!   when its origin lies in the closed interval `[min, max]` of that axis, and never otherwise.
 //! - **Origin exactly on a slab plane with a zero direction component** gives `0 * inf = NaN`.
-//!   The reductions ignore NaN candidates ([`max_l`](crate::math::max_l) returns its second operand
+//!   The reductions ignore NaN candidates ([`max_l`] returns its second operand
 //!   on NaN), so that axis does not constrain the ray: the ray lies in the face plane and touches
 //!   the closed box. This also makes a zero-thickness (flat) box hittable by rays in its plane.
 //! - **Zero-thickness boxes** (`min == max` on an axis, e.g. a flat triangle's box) are hit by rays

@@ -1,4 +1,4 @@
-//! Wide BVHs: a [`Bvh2`] collapsed into 4- or 8-wide nodes whose child boxes sit in SoA lanes for
+//! Wide BVHs: a [`Bvh2`](crate::build::Bvh2) collapsed into 4- or 8-wide nodes whose child boxes sit in SoA lanes for
 //! the x4/x8 slab test, with leaves of triangles pre-packed in SoA form for the x4/x8 triangle
 //! kernels. Traversal is in [`traverse::wide`](crate::traverse::wide).
 //!

@@ -1,7 +1,7 @@
 //! Procedural volumes and a pinhole camera, for tests, benches and examples (feature `alloc`).
 //!
 //! All volumes are `n^3` voxels over `[-1, 1]^3` (use [`unit_volume`] for the matching
-//! [`Volume`](super::Volume)), x fastest.
+//! [`Volume`]), x fastest.
 
 use super::{Volume, Voxel};
 use crate::geometry::Ray;
