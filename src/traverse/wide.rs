@@ -24,9 +24,9 @@ fn beyond(tnear: f32, tmax: f32) -> bool {
     tnear > tmax + abs(tmax) * FAR_SLACK
 }
 
-/// Asks the cache for child `code` (an interior node, or the first 384 bytes of a leaf's packs) ahead of its
-/// visit: children pushed now are popped after their siblings' subtrees, by when the lines have
-/// arrived. A hint only (no read happens; x86 only, a no-op elsewhere).
+/// Asks the cache for child `code` (an interior node, or the first 384 bytes of a leaf's packs)
+/// ahead of its visit: children pushed now are popped after their siblings' subtrees, by when the
+/// lines have arrived. A hint only (no read happens; x86 only, a no-op elsewhere).
 // PERF: measured on the 1M sphereflake (BVH8, 262k rays, best of 5): see the README's trace
 // section. Trees that fit in the cache gain nothing and lose nothing measurable.
 #[inline(always)]
