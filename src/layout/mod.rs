@@ -105,7 +105,8 @@ pub type Bvh8Ref<'a> = BvhWideRef<'a, f32x8, 8>;
 /// With the `hugepages` feature (default) on Linux, [`from_bvh2`](Self::from_bvh2) moves node and
 /// pack arrays of 4 MiB or more into memory advised for transparent huge pages, as Embree does
 /// with its trees (measured: about 1.2x on 1M-triangle scenes, where nearly every node read
-/// missed the TLB). A hint only; a `clone` is an ordinary allocation.
+/// missed the TLB). A hint only; the move briefly holds both copies, and a `clone` is an ordinary
+/// allocation.
 #[cfg(feature = "alloc")]
 #[derive(Clone, Debug)]
 pub struct BvhWide<L, const N: usize> {
