@@ -58,39 +58,35 @@ fn speed_on(big: bool) {
         let reps = if big { 1 } else { 3 };
         for _ in 0..8 {
             t[0] = t[0].min(min_ms(reps, || b8.intersect_batch::<Moller>(black_box(&r8), &mut hits)));
-            t[1] = t[1].min(min_ms(reps, || {
-                packet::intersect_batch_packets::<Moller, _, 8, f32x4, 4>(b8.view(), black_box(&r4), &mut hits, 0)
-            }));
-            t[2] = t[2].min(min_ms(reps, || {
-                packet::intersect_batch_packets::<Moller, _, 8, f32x8, 8>(b8.view(), black_box(&r8), &mut hits, 0)
-            }));
-            t[3] = t[3].min(min_ms(reps, || {
-                packet::intersect_batch_packets::<Moller, _, 8, f32x16, 16>(b8.view(), black_box(&r16), &mut hits, 0)
-            }));
-            t[4] = t[4].min(min_ms(reps, || {
-                packet::intersect_batch_packets::<Moller, _, 8, f32x4, 4>(
-                    b8.view(),
-                    black_box(&r4),
-                    &mut hits,
-                    packet::default_switch(4),
-                )
-            }));
-            t[5] = t[5].min(min_ms(reps, || {
-                packet::intersect_batch_packets::<Moller, _, 8, f32x8, 8>(
-                    b8.view(),
-                    black_box(&r8),
-                    &mut hits,
-                    packet::default_switch(8),
-                )
-            }));
-            t[6] = t[6].min(min_ms(reps, || {
-                packet::intersect_batch_packets::<Moller, _, 8, f32x16, 16>(
-                    b8.view(),
-                    black_box(&r16),
-                    &mut hits,
-                    packet::default_switch(16),
-                )
-            }));
+            // Pure packets (switch 0) into t[1..4], the default hybrids into t[4..7].
+            for (j, pure) in [true, false].into_iter().enumerate() {
+                let sw = |k| if pure { 0 } else { packet::default_switch(k) };
+                let t = &mut t[1 + 3 * j..4 + 3 * j];
+                t[0] = t[0].min(min_ms(reps, || {
+                    packet::intersect_batch_packets::<Moller, _, 8, f32x4, 4>(
+                        b8.view(),
+                        black_box(&r4),
+                        &mut hits,
+                        sw(4),
+                    )
+                }));
+                t[1] = t[1].min(min_ms(reps, || {
+                    packet::intersect_batch_packets::<Moller, _, 8, f32x8, 8>(
+                        b8.view(),
+                        black_box(&r8),
+                        &mut hits,
+                        sw(8),
+                    )
+                }));
+                t[2] = t[2].min(min_ms(reps, || {
+                    packet::intersect_batch_packets::<Moller, _, 8, f32x16, 16>(
+                        b8.view(),
+                        black_box(&r16),
+                        &mut hits,
+                        sw(16),
+                    )
+                }));
+            }
         }
         let s = t[0];
         println!(
