@@ -1,6 +1,6 @@
-//! Wide BVHs: a [`Bvh2`](crate::build::Bvh2) collapsed into 4- or 8-wide nodes whose child boxes sit in SoA lanes for
-//! the x4/x8 slab test, with leaves of triangles pre-packed in SoA form for the x4/x8 triangle
-//! kernels. Traversal is in [`traverse::wide`](crate::traverse::wide).
+//! Wide BVHs: a [`Bvh2`](crate::build::Bvh2) collapsed into 4- or 8-wide nodes whose child boxes
+//! sit in SoA lanes for the x4/x8 slab test, with leaves of triangles pre-packed in SoA form for
+//! the x4/x8 triangle kernels. Traversal is in [`traverse::wide`](crate::traverse::wide).
 //!
 //! # Collapse
 //! Top-down and cost-aware, as Embree and Wald et al. ("Getting rid of packets", 2008) do: a wide
@@ -104,9 +104,9 @@ pub type Bvh8Ref<'a> = BvhWideRef<'a, f32x8, 8>;
 ///
 /// With the `hugepages` feature (default) on Linux, [`from_bvh2`](Self::from_bvh2) moves node and
 /// pack arrays of 4 MiB or more into memory advised for transparent huge pages, as Embree does
-/// with its trees (measured: about 1.2x on 1M-triangle scenes, where nearly every node read
-/// missed the TLB). A hint only; the move briefly holds both copies, and a `clone` is an ordinary
-/// allocation.
+/// with its trees (measured: about 1.2x on 1M-triangle scenes, whose node and leaf reads miss the
+/// TLB on 4 KiB pages). A hint only; the move briefly holds both copies, and a `clone` is an
+/// ordinary allocation.
 #[cfg(feature = "alloc")]
 #[derive(Clone, Debug)]
 pub struct BvhWide<L, const N: usize> {

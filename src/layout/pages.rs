@@ -1,7 +1,7 @@
 //! Large tree arrays on transparent huge pages (Linux, feature `hugepages`).
 //!
 //! Traversal of a tree of a million triangles reads nodes and packs scattered over about 100 MB:
-//! on 4 KiB pages nearly every read misses the TLB as well as the cache. Embree allocates its
+//! on 4 KiB pages many of those reads miss the TLB as well as the cache. Embree allocates its
 //! trees with `madvise(MADV_HUGEPAGE)` (we saw 68 MB of `AnonHugePages` in its process on the
 //! 1M sphereflake); [`to_huge_pages`] gives the wide BVHs the same: a copy into fresh memory
 //! whose range is advised before it is first touched, so the kernel backs its 2 MiB-aligned
