@@ -4,34 +4,46 @@
 //!
 //! 1. Morton codes of the box centroids ([`geometry::morton`](crate::geometry::morton), 30 or 63
 //!    bits, eight at a time), quantised over the centroid bounds.
-//! 2. The references in Morton order. 30-bit codes ([`sort_gather30`]): one stable counting pass
-//!    on the top 8 bits moves the references themselves into 256 buckets (sequential reads, one
-//!    write stream per bucket), then each bucket, a few thousand references in cache on an even
-//!    scene, is sorted by `(code, position)` (two 11-bit LSD passes) and gathered back. 63-bit
-//!    codes: an LSD radix sort of `(code, reference)` pairs ([`radix`](super::radix)), then a
-//!    gather of the references in sorted order. Both orders are that of a stable sort by code.
-//! 3. The hierarchy, top-down with an explicit stack: a range of sorted codes is split where its
-//!    highest differing bit turns from 0 to 1, found by binary search. Duplicate codes are made
-//!    unique by appending each key's position in the sorted order, as Karras does: a range of
-//!    equal codes is split at the highest bit in which the positions of its ends differ (a
-//!    balanced split). Leaves hold `min_leaf_size` references, or up to `max_leaf_size` whose
+//! 2. The order: that of a stable sort by code. Duplicate codes are made unique by appending each
+//!    key's position in that order, as Karras does.
+//! 3. The hierarchy: a range of sorted codes is split where its highest differing bit turns from
+//!    0 to 1; a range of equal codes at the highest bit in which the positions of its ends differ
+//!    (a balanced split). Leaves hold `min_leaf_size` references, or up to `max_leaf_size` whose
 //!    codes are all equal.
-//! 4. Boxes bottom-up in the same walk: with the references in Morton order, a leaf's box is the
-//!    union of a contiguous run; an interior node's box is the union of its children's, computed
-//!    when a "finish" entry below them on the stack is popped (post-order, while the children are
-//!    still in cache).
+//! 4. Boxes: a leaf's is the union of its references', an interior node's that of its
+//!    children's.
 //!
-//! PERF (1M thin soup, one core, `BuildParams::fastest()`): the gather of step 2, 32-byte reads
-//! at random over 32 MB, took as long as the radix sort before it (TLB and latency bound); the
-//! bucketed sort and gather of 30-bit codes replaces both and halved that part; whole LBVH builds
-//! ran 1.1 to 1.6 times faster (median 1.2) in alternating runs (see the
-//! [module docs](super#measured)). Tried and dropped, no gain measured: a second,
-//! cache-sized array of every 32nd (or 8th) code to narrow the split search (the search is about
-//! a third of the walk's samples, but simulated cache misses did not change); `sort_unstable`
-//! within the buckets (slower than the two counting passes).
+//! Two implementations of steps 2 to 4 build the same tree (tested):
+//!
+//! - **30-bit codes, bottom-up** ([`bucketed30`], [`BottomUp`]; whenever [`bottom_up_ok`]: for
+//!   `BuildParams::fastest()` always). One stable counting pass on the top 8 code bits moves the
+//!   references into 256 buckets (sequential reads, one write stream per bucket); bucket by
+//!   bucket, the keys `(code, position)` are sorted in cache (two 11-bit LSD passes) and the
+//!   references fed in that order to a one-pass bottom-up construction: the split of a range is
+//!   its boundary of largest "separator" (highest differing bit), so the hierarchy is the
+//!   Cartesian tree of the separators, which a stack builds left to right (as Apetrei, "Fast and
+//!   Simple Agglomerative LBVH Construction", 2014, builds it bottom-up); boxes are unions on the
+//!   way up, and the leaves are the largest subtrees that qualify. No binary searches, no sorted
+//!   copy of the references; nodes laid out in post-order.
+//! - **Top-down** ([`walk`]; 63-bit codes, HLBVH's clusters, and a `max_depth` too small for the
+//!   bound below). The references in Morton order ([`sort_gather30`], or an LSD radix sort of
+//!   `(code, reference)` pairs and a gather for 63-bit codes), then an explicit stack splits each
+//!   range at the position found by binary search, and computes boxes when a "finish" entry below
+//!   the children is popped.
+//!
+//! PERF (1M thin soup, one core, `BuildParams::fastest()`, warm builder): the bottom-up path
+//! builds in about 47 ms where `sort_gather30` and the walk took about 60 (26 ms to sort and
+//! gather the references, 26 ms to walk them). Tried on the way and dropped: one global sort of
+//! the keys (a top-digit scatter, then buckets in cache) feeding the bottom-up pass with
+//! prefetched reads of the references in input order: those 1M random reads took 17 of the pass's
+//! 37 ms, even with the references on huge pages, where the bucketed references are read once in
+//! order and then from the cache. Earlier, for the walk: a second, cache-sized array of every
+//! 32nd (or 8th) code to narrow the split search (no gain), `sort_unstable` within the buckets
+//! (slower than the two counting passes).
 //!
 //! The depth bound of [`BuildParams::max_depth`] holds as in the top-down builders: a split that
-//! would break it is replaced by the middle of the range.
+//! would break it is replaced by the middle of the range. (The bottom-up path never meets such a
+//! split: see [`bottom_up_ok`].)
 
 use super::builder::{Builder, Counters};
 use super::prims::{Box8, PrepInfo, PrimRef, depth_ok};
@@ -89,6 +101,10 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
         ..
     } = b;
     match p.morton_bits {
+        MortonBits::Bits30 if bottom_up_ok(refs.len(), p) => {
+            let q = MortonQuantizer::new30(&cb);
+            bucketed30(refs, alt, items32, packed, packed_tmp, &q, p, out)
+        }
         MortonBits::Bits30 => {
             let q = MortonQuantizer::new30(&cb);
             sort_gather30(refs, alt, items32, packed, packed_tmp, &q, out);
@@ -317,7 +333,7 @@ pub(crate) fn sort_gather30(
 /// for both histograms), or `sort_unstable` for short buckets. `tmp` is scratch.
 // PERF: measured on the 1M soup (buckets of about 4,000, under load): the bucket phase of
 // `sort_gather30` took 25 ms with `sort_unstable` on every bucket, 18 ms with these two passes.
-fn sort_bucket(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
+fn sort_bucket(keys: &mut [u64], tmp: &mut Vec<u64>) {
     const W: u32 = 11;
     const B: usize = 1 << W;
     const _: () = assert!(2 * W >= 30 - TOP_BITS);
@@ -333,7 +349,7 @@ fn sort_bucket(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
         hist[1][digit(k, 1)] += 1;
     }
     tmp.resize(m, 0);
-    for (pass, h) in hist.iter_mut().enumerate() {
+    for h in hist.iter_mut() {
         // Exclusive prefix sums: the first output slot of each digit.
         let mut sum = 0u32;
         for c in h.iter_mut() {
@@ -341,15 +357,23 @@ fn sort_bucket(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
             *c = sum;
             sum += v;
         }
-        for &k in keys.iter() {
-            let slot = &mut h[digit(k, pass as u32)];
-            // `*slot < m`: the prefix sums of a histogram of m keys.
-            if let Some(d) = tmp.get_mut(*slot as usize) {
-                *d = k;
-            }
-            *slot += 1;
+    }
+    // Into `tmp` by the low digit, back into `keys` by the high one.
+    let [h0, h1] = &mut hist;
+    for &k in keys.iter() {
+        let slot = &mut h0[digit(k, 0)];
+        // `*slot < m`: the prefix sums of a histogram of m keys.
+        if let Some(d) = tmp.get_mut(*slot as usize) {
+            *d = k;
         }
-        core::mem::swap(keys, tmp);
+        *slot += 1;
+    }
+    for &k in tmp.iter() {
+        let slot = &mut h1[digit(k, 1)];
+        if let Some(d) = keys.get_mut(*slot as usize) {
+            *d = k;
+        }
+        *slot += 1;
     }
 }
 
@@ -505,6 +529,289 @@ pub(crate) fn walk<K: Code>(
     }
 }
 
+/// `true` if [`BottomUp`] builds exactly the tree of [`walk`] for `n` references: the depth
+/// bound can never force a split. On the path to any node the splits consume distinct code bits
+/// (at most 30) and then distinct bits of the positions (at most `ceil(log2 n)`), so a child of
+/// `m` references at depth `d + 1` has `d + 1 + ceil(log2 m) <= 31 + ceil(log2 n)`.
+#[inline]
+pub(crate) fn bottom_up_ok(n: usize, p: &BuildParams) -> bool {
+    n <= super::MAX_PRIMITIVES && 31 + super::prims::ceil_log2(n as u32) <= p.max_depth
+}
+
+/// A finished subtree of [`BottomUp`], waiting for its parent.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    bx: Box8,
+    /// Its range of sorted positions.
+    begin: u32,
+    end: u32,
+    /// The codes at `begin` and `end - 1`.
+    first: u32,
+    last: u32,
+    /// Its left child's index (the right one follows), or [`LEAF`] while the subtree may still
+    /// become (part of) one leaf.
+    pair: u32,
+    /// Height (a leaf is 1).
+    height: u32,
+}
+
+/// [`Pending::pair`] of a leaf candidate.
+const LEAF: u32 = u32::MAX;
+
+impl Pending {
+    /// Its node: a leaf over its range, or an interior node.
+    #[inline(always)]
+    fn node(&self) -> Node {
+        if self.pair == LEAF {
+            self.bx.to_node(self.begin, self.end - self.begin)
+        } else {
+            self.bx.to_node(self.pair, 0)
+        }
+    }
+}
+
+/// The LBVH built bottom-up from references fed in Morton order ([`feed`](Self::feed), then
+/// [`finish`](Self::finish)), the same tree as [`walk`] where [`bottom_up_ok`] holds (tested),
+/// laid out in post-order.
+///
+/// With the position appended to every code (Karras 2012), the split of a range is the one
+/// boundary `i | i + 1` inside it of largest "separator": the highest differing bit of the two
+/// codes, above every bit of the positions where the codes are equal. So the hierarchy is the
+/// Cartesian tree of the separators (largest at the root), which a stack builds in one pass, as
+/// Apetrei ("Fast and Simple Agglomerative LBVH Construction", 2014) builds it bottom-up: a
+/// subtree on the stack joins the one to its right while its separator is smaller than the
+/// next. Boxes are unions on the way up; the leaves are the largest subtrees that qualify (at
+/// most `min_leaf_size` references, or at most `max_leaf_size` with equal codes), exactly those
+/// where the top-down walk stops. A finished interior node appends its children's pair to the
+/// node array, so every subtree's nodes are contiguous and children come before their parent
+/// (the root, at index 0, excepted). No binary searches, and the references are read once.
+struct BottomUp {
+    /// Subtrees with the separator to their right; separators decrease from bottom to top.
+    stack: Vec<(Pending, u32)>,
+    /// The last reference fed and its code (its separator needs the next code).
+    prev: PrimRef,
+    prev_code: u32,
+    /// References fed so far.
+    at: u32,
+    min_leaf: u32,
+    max_leaf: u32,
+    c: Counters,
+}
+
+impl BottomUp {
+    fn new(p: &BuildParams, n: usize, out: &mut Bvh2) -> Self {
+        out.prim_indices.clear();
+        out.prim_indices.reserve(n);
+        out.nodes.clear();
+        out.nodes.reserve((2 * n).saturating_sub(1));
+        // The root's slot.
+        out.nodes.push(<Node as bytemuck::Zeroable>::zeroed());
+        Self {
+            stack: Vec::with_capacity(64),
+            prev: PrimRef(f32x8::ZERO),
+            prev_code: 0,
+            at: 0,
+            min_leaf: p.min_leaf_size,
+            max_leaf: p.max_leaf_size,
+            c: Counters::default(),
+        }
+    }
+
+    /// The parent of `l` and `r` (adjacent ranges): one leaf candidate if the joint range
+    /// qualifies, else an interior node whose children are written out.
+    #[inline(always)]
+    fn join(&mut self, l: Pending, r: Pending, nodes: &mut Vec<Node>) -> Pending {
+        let bx = l.bx.union(r.bx);
+        let count = r.end - l.begin;
+        // NOTE: qualifying is monotone (a part of a qualifying range qualifies), so a parent can
+        // only qualify if both children do.
+        if l.pair == LEAF && r.pair == LEAF && (count <= self.min_leaf || (count <= self.max_leaf && l.first == r.last))
+        {
+            return Pending {
+                bx,
+                end: r.end,
+                last: r.last,
+                ..l
+            };
+        }
+        self.c.leaves += u32::from(l.pair == LEAF) + u32::from(r.pair == LEAF);
+        let pair = nodes.len() as u32;
+        nodes.push(l.node());
+        nodes.push(r.node());
+        Pending {
+            bx,
+            begin: l.begin,
+            end: r.end,
+            first: l.first,
+            last: r.last,
+            pair,
+            height: l.height.max(r.height) + 1,
+        }
+    }
+
+    /// The next reference in Morton order (ties in input order) and its code.
+    #[inline(always)]
+    fn feed(&mut self, code: u32, r: PrimRef, out: &mut Bvh2) {
+        out.prim_indices.push(r.index());
+        let (pcode, pr) = (self.prev_code, self.prev);
+        self.prev_code = code;
+        self.prev = r;
+        let i = self.at;
+        self.at += 1;
+        // The first reference waits for the second.
+        if i == 0 {
+            return;
+        }
+        let i = i - 1;
+        let x = pcode ^ code;
+        // Separator: 32 + the highest differing code bit, or the highest differing bit of the
+        // positions `i` and `i + 1` where the codes are equal.
+        let sep = if x != 0 {
+            63 - x.leading_zeros()
+        } else {
+            31 - (i ^ (i + 1)).leading_zeros()
+        };
+        let mut cur = Self::leaf(&pr, i, pcode);
+        while let Some(&(l, s)) = self.stack.last() {
+            if s > sep {
+                break;
+            }
+            self.stack.pop();
+            cur = self.join(l, cur, &mut out.nodes);
+        }
+        self.stack.push((cur, sep));
+    }
+
+    #[inline(always)]
+    fn leaf(r: &PrimRef, i: u32, code: u32) -> Pending {
+        Pending {
+            bx: r.bounds(),
+            begin: i,
+            end: i + 1,
+            first: code,
+            last: code,
+            pair: LEAF,
+            height: 1,
+        }
+    }
+
+    /// Joins what is left into the root (at index 0).
+    fn finish(mut self, out: &mut Bvh2) -> Counters {
+        if self.at == 0 {
+            out.nodes.clear();
+            return self.c;
+        }
+        let mut root = Self::leaf(&self.prev, self.at - 1, self.prev_code);
+        while let Some((l, _)) = self.stack.pop() {
+            root = self.join(l, root, &mut out.nodes);
+        }
+        if root.pair == LEAF {
+            self.c.leaves += 1;
+        }
+        self.c.max_depth = root.height;
+        out.nodes[0] = root.node();
+        self.c
+    }
+}
+
+/// The 30-bit LBVH of `refs` (in input order) through [`BottomUp`], with the references put in
+/// Morton order bucket by bucket:
+///
+/// 1. One pass computes the codes (eight at a time) into `codes` and counts their top
+///    [`TOP_BITS`] bits.
+/// 2. One stable counting pass on that digit moves the references into `alt` (sequential reads,
+///    one write stream per bucket); each one's code travels in its lane 7
+///    ([`PrimRef::with_tag`]).
+/// 3. Bucket by bucket (a few thousand references on an even scene): a sequential read of its
+///    references makes the keys `(code << 32) | position in the bucket` and brings them into the
+///    cache; [`sort_bucket`] sorts the keys; the references are fed to [`BottomUp`] in that
+///    order, from the cache.
+///
+/// The order is that of a stable sort by code, as [`sort_gather30`] makes it, but the sorted
+/// references are never written out.
+// PERF: see the module docs.
+#[allow(clippy::too_many_arguments)]
+fn bucketed30(
+    refs: &[PrimRef],
+    alt: &mut Vec<PrimRef>,
+    codes: &mut Vec<Item<u32>>,
+    keys: &mut Vec<u64>,
+    tmp: &mut Vec<u64>,
+    q: &MortonQuantizer,
+    p: &BuildParams,
+    out: &mut Bvh2,
+) -> Counters {
+    const BUCKETS: usize = 1 << TOP_BITS;
+    const SHIFT: u32 = 30 - TOP_BITS;
+    let n = refs.len();
+    let digit = |code: u32| (code >> SHIFT) as usize & (BUCKETS - 1);
+    // Codes (into `codes`, in input order), and the histogram of the top digit.
+    let mut start = [0u32; BUCKETS + 1];
+    codes.resize(n, Item::default());
+    let mut chunks = refs.chunks_exact(8);
+    let mut out_chunks = codes.chunks_exact_mut(8);
+    for (c, o) in (&mut chunks).zip(&mut out_chunks) {
+        let mut xyz = [[0.0f32; 8]; 3];
+        for (i, r) in c.iter().enumerate() {
+            let v = r.c2().to_array();
+            xyz[0][i] = v[0];
+            xyz[1][i] = v[1];
+            xyz[2][i] = v[2];
+        }
+        let k = morton30_x8(f32x8::new(xyz[0]), f32x8::new(xyz[1]), f32x8::new(xyz[2]), q).to_array();
+        for (it, &code) in o.iter_mut().zip(&k) {
+            it.key = code;
+            start[digit(code)] += 1;
+        }
+    }
+    for (r, it) in chunks.remainder().iter().zip(out_chunks.into_remainder()) {
+        let v = r.c2().to_array();
+        let code = morton30_scalar(Vec3::new(v[0], v[1], v[2]), q);
+        it.key = code;
+        start[digit(code)] += 1;
+    }
+    // Exclusive prefix sums: the first slot of each bucket.
+    let mut sum = 0u32;
+    for c in start.iter_mut() {
+        let v = *c;
+        *c = sum;
+        sum += v;
+    }
+    // NOTE: resized only when the length changes; every slot is written before it is read.
+    if alt.len() != n {
+        alt.resize(n, PrimRef(Default::default()));
+    }
+    let mut cursor = start;
+    for (r, it) in refs.iter().zip(codes.iter()) {
+        let slot = &mut cursor[digit(it.key)];
+        // `*slot < n`: the prefix sums of a histogram of n keys.
+        if let Some(d) = alt.get_mut(*slot as usize) {
+            *d = r.with_tag(it.key);
+        }
+        *slot += 1;
+    }
+    let mut bu = BottomUp::new(p, n, out);
+    for w in start.windows(2) {
+        let (a, b) = (w[0] as usize, (w[1] as usize).min(n));
+        let Some(bucket) = alt.get(a..b) else { continue };
+        keys.clear();
+        keys.extend(
+            bucket
+                .iter()
+                .enumerate()
+                .map(|(j, r)| u64::from(r.tag()) << 32 | j as u64),
+        );
+        sort_bucket(keys, tmp);
+        for &k in keys.iter() {
+            // The low half of a key is a position in the bucket.
+            if let Some(r) = bucket.get(k as u32 as usize) {
+                bu.feed((k >> 32) as u32, r.with_tag(0), out);
+            }
+        }
+    }
+    bu.finish(out)
+}
+
 /// Leaves among `nodes` (a collapsed subtree's nodes, at most `2 count - 2` of them).
 #[inline]
 fn leaves_below(count: u32, nodes: &[Node]) -> u32 {
@@ -518,6 +825,7 @@ mod tests {
     use crate::build::prims::prepare;
     use crate::geometry::Aabb;
     use crate::scene::Rng;
+    use alloc::{format, vec};
 
     /// `sort_gather30` against the plain pipeline: codes, a stable radix sort, a gather.
     fn check(boxes: &[Aabb]) {
@@ -572,6 +880,97 @@ mod tests {
             // Invalid boxes are left out by `prepare`: positions and indices differ.
             cluster.push(Aabb::new(Vec3::splat(f32::NAN), Vec3::ONE));
             check(&cluster);
+        }
+    }
+
+    /// The tree below `node` as nested tuples: boxes and primitive slots, ignoring where the
+    /// nodes sit in the array.
+    fn canonical(b: &Bvh2, node: u32, out: &mut Vec<[u32; 8]>) {
+        let n = b.nodes[node as usize];
+        let bits: [u32; 8] = bytemuck::cast(n);
+        if n.is_leaf() {
+            out.push(bits);
+        } else {
+            out.push([bits[0], bits[1], bits[2], u32::MAX, bits[4], bits[5], bits[6], 0]);
+            canonical(b, n.left(), out);
+            canonical(b, n.left() + 1, out);
+        }
+    }
+
+    /// The bottom-up LBVH against the top-down walk over the same order: the same tree (up to
+    /// where nodes sit in the array), leaves, slots, depth.
+    #[test]
+    fn bottom_up_equals_the_top_down_walk() {
+        let mut r = Rng::new(17);
+        let mut scenes: Vec<Vec<Aabb>> = Vec::new();
+        for n in [1, 2, 3, 5, 8, 9, 100, 3000, 20_000] {
+            let spread: Vec<Aabb> = (0..n)
+                .map(|_| {
+                    let p = Vec3::new(r.f32(), r.f32(), r.f32());
+                    Aabb::new(p, p + Vec3::splat(r.range(0.0, 0.05)))
+                })
+                .collect();
+            // Many equal codes: a coarse grid, and every box the same.
+            let grid: Vec<Aabb> = spread
+                .iter()
+                .map(|a| {
+                    let p = (a.min * 3.0).round();
+                    Aabb::new(p, p + Vec3::ONE)
+                })
+                .collect();
+            let same = vec![Aabb::new(Vec3::ZERO, Vec3::ONE); n];
+            // A tight cluster and a far outlier (one bucket holds almost everything).
+            let mut cluster: Vec<Aabb> = spread.iter().map(|a| Aabb::new(a.min * 1e-3, a.max * 1e-3)).collect();
+            cluster.push(Aabb::new(Vec3::splat(1e3), Vec3::splat(1e3 + 1.0)));
+            scenes.extend([spread, grid, same, cluster]);
+        }
+        for (s, boxes) in scenes.iter().enumerate() {
+            for (min_leaf, max_leaf) in [(1, 1), (1, 4), (2, 4), (4, 8), (3, 3)] {
+                let p = BuildParams {
+                    min_leaf_size: min_leaf,
+                    max_leaf_size: max_leaf,
+                    ..BuildParams::fastest()
+                };
+                let mut b = Builder::new();
+                let info = prepare(&boxes[..], &mut b.refs).unwrap();
+                assert!(bottom_up_ok(b.refs.len(), &p));
+                let q = MortonQuantizer::new30(&info.cbounds.to_aabb());
+                let refs = b.refs.clone();
+                let Builder {
+                    refs: r2,
+                    alt,
+                    items32,
+                    packed,
+                    packed_tmp,
+                    ..
+                } = &mut b;
+                let mut want = Bvh2::default();
+                sort_gather30(r2, alt, items32, packed, packed_tmp, &q, &mut want);
+                let cw = walk_sorted(r2, items32, &p, &mut want);
+                let mut got = Bvh2::default();
+                let cg = bucketed30(&refs, alt, items32, packed, packed_tmp, &q, &p, &mut got);
+                let what = format!("scene {s} ({} boxes), leaves {min_leaf}..={max_leaf}", boxes.len());
+                assert_eq!(got.prim_indices, want.prim_indices, "{what}");
+                assert_eq!(got.nodes.len(), want.nodes.len(), "{what}");
+                assert_eq!(
+                    (cg.leaves, cg.max_depth, cg.forced_splits),
+                    (cw.leaves, cw.max_depth, 0),
+                    "{what}"
+                );
+                let (mut a, mut w) = (Vec::new(), Vec::new());
+                canonical(&got, 0, &mut a);
+                canonical(&want, 0, &mut w);
+                assert!(a == w, "{what}");
+                assert!(got.validate(&boxes[..]).is_ok(), "{what}");
+                // Post-order: children before their parent, the root excepted.
+                assert!(
+                    got.nodes
+                        .iter()
+                        .enumerate()
+                        .skip(1)
+                        .all(|(i, n)| n.is_leaf() || (n.left() as usize) < i)
+                );
+            }
         }
     }
 }
