@@ -98,12 +98,13 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
         tmp64,
         packed,
         packed_tmp,
+        codes,
         ..
     } = b;
     match p.morton_bits {
         MortonBits::Bits30 if bottom_up_ok(refs.len(), p) => {
             let q = MortonQuantizer::new30(&cb);
-            bucketed30(refs, alt, items32, packed, packed_tmp, &q, p, out)
+            bucketed30(refs, alt, codes, packed, packed_tmp, &q, p, out)
         }
         MortonBits::Bits30 => {
             let q = MortonQuantizer::new30(&cb);
@@ -586,8 +587,11 @@ impl Pending {
 /// node array, so every subtree's nodes are contiguous and children come before their parent
 /// (the root, at index 0, excepted). No binary searches, and the references are read once.
 struct BottomUp {
-    /// Subtrees with the separator to their right; separators decrease from bottom to top.
-    stack: Vec<(Pending, u32)>,
+    /// Subtrees with the separator to their right, `len` of them; separators decrease from
+    /// bottom to top, and there are 62 values (`0 ..= 61`), so at most 62 entries.
+    subs: [Pending; 64],
+    seps: [u32; 64],
+    len: usize,
     /// The last reference fed and its code (its separator needs the next code).
     prev: PrimRef,
     prev_code: u32,
@@ -607,7 +611,17 @@ impl BottomUp {
         // The root's slot.
         out.nodes.push(<Node as bytemuck::Zeroable>::zeroed());
         Self {
-            stack: Vec::with_capacity(64),
+            subs: [Pending {
+                bx: Box8::EMPTY,
+                begin: 0,
+                end: 0,
+                first: 0,
+                last: 0,
+                pair: LEAF,
+                height: 0,
+            }; 64],
+            seps: [0; 64],
+            len: 0,
             prev: PrimRef(f32x8::ZERO),
             prev_code: 0,
             at: 0,
@@ -672,14 +686,15 @@ impl BottomUp {
             31 - (i ^ (i + 1)).leading_zeros()
         };
         let mut cur = Self::leaf(&pr, i, pcode);
-        while let Some(&(l, s)) = self.stack.last() {
-            if s > sep {
-                break;
-            }
-            self.stack.pop();
+        // `& 63`: a no-op on lengths up to 62 (see `subs`) that drops the bounds checks.
+        while self.len > 0 && self.seps[(self.len - 1) & 63] < sep {
+            self.len -= 1;
+            let l = self.subs[self.len & 63];
             cur = self.join(l, cur, &mut out.nodes);
         }
-        self.stack.push((cur, sep));
+        self.subs[self.len & 63] = cur;
+        self.seps[self.len & 63] = sep;
+        self.len += 1;
     }
 
     #[inline(always)]
@@ -702,7 +717,9 @@ impl BottomUp {
             return self.c;
         }
         let mut root = Self::leaf(&self.prev, self.at - 1, self.prev_code);
-        while let Some((l, _)) = self.stack.pop() {
+        while self.len > 0 {
+            self.len -= 1;
+            let l = self.subs[self.len & 63];
             root = self.join(l, root, &mut out.nodes);
         }
         if root.pair == LEAF {
@@ -734,7 +751,7 @@ impl BottomUp {
 fn bucketed30(
     refs: &[PrimRef],
     alt: &mut Vec<PrimRef>,
-    codes: &mut Vec<Item<u32>>,
+    codes: &mut Vec<u32>,
     keys: &mut Vec<u64>,
     tmp: &mut Vec<u64>,
     q: &MortonQuantizer,
@@ -747,7 +764,7 @@ fn bucketed30(
     let digit = |code: u32| (code >> SHIFT) as usize & (BUCKETS - 1);
     // Codes (into `codes`, in input order), and the histogram of the top digit.
     let mut start = [0u32; BUCKETS + 1];
-    codes.resize(n, Item::default());
+    codes.resize(n, 0);
     let mut chunks = refs.chunks_exact(8);
     let mut out_chunks = codes.chunks_exact_mut(8);
     for (c, o) in (&mut chunks).zip(&mut out_chunks) {
@@ -760,14 +777,14 @@ fn bucketed30(
         }
         let k = morton30_x8(f32x8::new(xyz[0]), f32x8::new(xyz[1]), f32x8::new(xyz[2]), q).to_array();
         for (it, &code) in o.iter_mut().zip(&k) {
-            it.key = code;
+            *it = code;
             start[digit(code)] += 1;
         }
     }
     for (r, it) in chunks.remainder().iter().zip(out_chunks.into_remainder()) {
         let v = r.c2().to_array();
         let code = morton30_scalar(Vec3::new(v[0], v[1], v[2]), q);
-        it.key = code;
+        *it = code;
         start[digit(code)] += 1;
     }
     // Exclusive prefix sums: the first slot of each bucket.
@@ -782,11 +799,11 @@ fn bucketed30(
         alt.resize(n, PrimRef(Default::default()));
     }
     let mut cursor = start;
-    for (r, it) in refs.iter().zip(codes.iter()) {
-        let slot = &mut cursor[digit(it.key)];
+    for (r, &code) in refs.iter().zip(codes.iter()) {
+        let slot = &mut cursor[digit(code)];
         // `*slot < n`: the prefix sums of a histogram of n keys.
         if let Some(d) = alt.get_mut(*slot as usize) {
-            *d = r.with_tag(it.key);
+            *d = r.with_tag(code);
         }
         *slot += 1;
     }
@@ -942,13 +959,14 @@ mod tests {
                     items32,
                     packed,
                     packed_tmp,
+                    codes,
                     ..
                 } = &mut b;
                 let mut want = Bvh2::default();
                 sort_gather30(r2, alt, items32, packed, packed_tmp, &q, &mut want);
                 let cw = walk_sorted(r2, items32, &p, &mut want);
                 let mut got = Bvh2::default();
-                let cg = bucketed30(&refs, alt, items32, packed, packed_tmp, &q, &p, &mut got);
+                let cg = bucketed30(&refs, alt, codes, packed, packed_tmp, &q, &p, &mut got);
                 let what = format!("scene {s} ({} boxes), leaves {min_leaf}..={max_leaf}", boxes.len());
                 assert_eq!(got.prim_indices, want.prim_indices, "{what}");
                 assert_eq!(got.nodes.len(), want.nodes.len(), "{what}");
