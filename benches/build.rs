@@ -154,6 +154,7 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
             },
         ),
         ("hlbvh+treelets (hybrid)", BuildParams::hybrid()),
+        ("hlbvh-sah (hybrid_sah)", BuildParams::hybrid_sah()),
         (
             "binned8-longest+treelets",
             BuildParams {

@@ -47,6 +47,27 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
             },
         ),
         ("hybrid", BuildParams::hybrid()),
+        ("hybrid_sah", BuildParams::hybrid_sah()),
+        (
+            "hlbvhsah4-63-leaf2",
+            BuildParams {
+                strategy: Strategy::HlbvhSah,
+                cluster_size: 4,
+                morton_bits: MortonBits::Bits63,
+                min_leaf_size: 2,
+                max_leaf_size: 8,
+                ..BuildParams::fastest()
+            },
+        ),
+        (
+            "hlbvhsah1-longest",
+            BuildParams {
+                strategy: Strategy::HlbvhSah,
+                cluster_size: 1,
+                bin_axes: BinAxes::Longest,
+                ..BuildParams::hybrid_sah()
+            },
+        ),
         (
             "hlbvh4-63-leaf2",
             BuildParams {
@@ -639,4 +660,23 @@ fn sah_cost_orders_the_builders() {
         "binned {binned} median {median} lbvh {lbvh}"
     );
     assert!(tris.len() > 0);
+}
+
+#[test]
+fn hybrid_sah_is_near_the_full_sweep_and_beats_fast() {
+    // Morton clusters with SAH mini-trees: close to the full sweep's SAH cost, better than the
+    // longest-axis binned builder, on a soup large enough for many clusters.
+    let soup = scene::thin_soup(60_000, 3);
+    let cost = |p: BuildParams| {
+        let (bvh, _) = Bvh2::build(&soup[..], &p).unwrap();
+        assert!(bvh.validate(&soup[..]).is_ok());
+        bvh.sah_cost(1.0, 1.0)
+    };
+    let (sweep, hybrid, fast) = (
+        cost(BuildParams::quality()),
+        cost(BuildParams::hybrid_sah()),
+        cost(BuildParams::fast()),
+    );
+    assert!(hybrid <= sweep * 1.04, "hybrid_sah {hybrid} sweep {sweep}");
+    assert!(hybrid < fast, "hybrid_sah {hybrid} fast {fast}");
 }

@@ -4,7 +4,7 @@
 //! warm its [`Builder`], then `STRAHL_REPS` timed builds (default 5), best and median. `STRAHL_N`
 //! sets the soup size (`scene::thin_soup(n, 1)`, default 2^20); `STRAHL_ONLY` a comma-separated
 //! list of builders (`fastest`, `lbvh63`, `fast`, `binned8all`, `balanced`, `median`, `quality`,
-//! `hlbvh`).
+//! `hlbvh`, `hybrid_sah`).
 
 use std::time::Instant;
 use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, Strategy};
@@ -36,6 +36,7 @@ fn speed() {
             },
         ),
         ("balanced", BuildParams::balanced()),
+        ("hybrid_sah", BuildParams::hybrid_sah()),
         ("median", BuildParams::median()),
         ("quality", BuildParams::quality()),
         (

@@ -89,6 +89,12 @@ pub fn builders() -> Vec<BuildParams> {
             refine: Refine::Treelets(TreeletParams::new()),
             ..BuildParams::fastest()
         },
+        BuildParams::hybrid_sah(),
+        BuildParams {
+            cluster_size: 2,
+            morton_bits: MortonBits::Bits63,
+            ..BuildParams::hybrid_sah()
+        },
     ]
 }
 

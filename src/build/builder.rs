@@ -113,7 +113,7 @@ impl Builder {
                 Strategy::Median | Strategy::BinnedSah => topdown::build(self, &info, params, out),
                 Strategy::SweepSah => sweep::build(self, &info, params, out),
                 Strategy::Lbvh => lbvh::build(self, &info, params, out),
-                Strategy::Hlbvh => hlbvh::build(self, &info, params, out),
+                Strategy::Hlbvh | Strategy::HlbvhSah => hlbvh::build(self, &info, params, out),
             }
         };
         debug_assert_eq!(out.prim_indices.len(), n);

@@ -13,19 +13,23 @@
 //! 3. **Top**: binned SAH ([`topdown`](super::topdown)) over one reference per cluster (the
 //!    cluster's box), split down to single clusters.
 //! 4. **Bottoms**: each top leaf becomes the LBVH hierarchy of its cluster's run, built into that
-//!    node with the LBVH walk (same leaf rules, boxes bottom-up).
+//!    node with the LBVH walk (same leaf rules, boxes bottom-up); for
+//!    [`Strategy::HlbvhSah`](super::Strategy::HlbvhSah), the binned-SAH subtree of the run, built
+//!    by the top-down builder (everything in cache for clusters of a few thousand).
 //!
 //! **Depth.** With clusters of at most `M` primitives, the top is built with the depth bound
 //! `max_depth - ceil(log2 M)`, so each cluster's bottom (at most `ceil(log2 M)` levels more, by
 //! the LBVH's own bound) fits; the cluster size is capped so that the top still fits a balanced
 //! tree over up to `n` clusters.
 
+use super::binned::Bins;
 use super::builder::{Builder, Counters};
 use super::lbvh::{Code, codes_of, gather, sort_gather30, split_point, walk};
 use super::prims::{Box8, CBounds, PrepInfo, PrimRef, ceil_log2};
 use super::radix::{Item, sort_items};
 use super::{BuildParams, Bvh2, MortonBits, Strategy, topdown};
 use crate::geometry::morton::{MortonQuantizer, morton63_scalar, morton63_x8};
+use alloc::vec::Vec;
 
 /// Builds an HLBVH.
 pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2) -> Counters {
@@ -142,9 +146,36 @@ fn hierarchy<K: Code>(
     };
 
     // Bottoms: copy the top, then grow each top leaf into its cluster's subtree.
+    out.nodes.reserve((2 * n as usize).saturating_sub(1));
+    out.nodes.extend_from_slice(&top.nodes);
+    if p.strategy == Strategy::HlbvhSah {
+        // SAH mini-trees: the binned builder over each cluster's run of sorted references (in
+        // `alt`, with `refs` as its second buffer).
+        let bp = BuildParams {
+            strategy: Strategy::BinnedSah,
+            ..*p
+        };
+        let mut bins = Bins::new();
+        let mut tasks = Vec::new();
+        let tstack = &mut b.ranges;
+        tstack.clear();
+        tstack.push([0, 1]);
+        while let Some([i, depth]) = tstack.pop() {
+            let node = top.nodes[i as usize];
+            if !node.is_leaf() {
+                tstack.push([node.left(), depth + 1]);
+                tstack.push([node.left() + 1, depth + 1]);
+                continue;
+            }
+            let k = top.prim_indices.get(node.index as usize).copied().unwrap_or(0);
+            let [lo, hi] = clusters[k as usize];
+            let (bx, cb) = topdown::bounds_of(&b.alt[lo as usize..hi as usize]);
+            let task = topdown::Task::new([i, lo, hi, depth], bx, cb);
+            topdown::subtree(&mut b.alt, &mut b.refs, &bp, out, task, &mut bins, &mut tasks, &mut c);
+        }
+        return c;
+    }
     let nodes = &mut out.nodes;
-    nodes.reserve((2 * n as usize).saturating_sub(1));
-    nodes.extend_from_slice(&top.nodes);
     let (stack, tstack) = (&mut b.walk, &mut b.ranges);
     stack.sah_leaves = true;
     tstack.clear();

@@ -16,6 +16,7 @@
 //! | [`SweepSah`](Strategy::SweepSah) | MacDonald and Booth 1990; Wald, Boulos, Shirley 2007 | sweep every boundary of three pre-sorted lists, stable partition, O(n) | O(n log n) after three radix sorts |
 //! | [`Lbvh`](Strategy::Lbvh) | Lauterbach et al. 2009; Karras 2012 | binary search for the highest differing bit | O(n) after a radix sort |
 //! | [`Hlbvh`](Strategy::Hlbvh) | Pantaleoni and Luebke 2010; Garanzha et al. 2011 | LBVH bottoms in clusters of up to [`cluster_size`](BuildParams::cluster_size) codes (SAH leaf collapse), binned SAH over the clusters' boxes on top | O(n) after a radix sort, plus binned SAH over the clusters |
+//! | [`HlbvhSah`](Strategy::HlbvhSah) | HLBVH clusters with Bonsai-style SAH mini-trees (Ganestam et al. 2015) | the binned builder within each cluster, in cache | O(n) sort, plus binned SAH over the clusters and within them |
 //! | [`Refine::Treelets`] (after any of them) | Karras and Aila 2013 (TRBVH) | best topology of a 3 ..= 8-leaf treelet by dynamic programming over its leaf subsets, `~3^k / 2` steps | O(n) per round |
 //!
 //! The top-down builders share one loop (pbrt's `BUILD(node)`: split, group left and right,
@@ -155,6 +156,20 @@
 //! `balanced()`) about 29% in the exact sweep of small ranges, 26% in binning and bin sweeps, 19%
 //! in partitioning and 18% in the per-node loop. Cold builds are dominated by first-touch page
 //! faults on this machine (64 MB of new pages cost about 40 ms).
+//!
+//! **Morton clusters with SAH mini-trees** (2026-12-02, [`BuildParams::hybrid_sah`]; same
+//! harness, `STRAHL_ONLY=hybrid_sah,fast,quality STRAHL_REPS=5`, two runs at load average about
+//! 1): on the 1M soup `hybrid_sah()` 166 to 177 ms (5.9 to 6.3 Mtri/s) with SAH cost 479.09,
+//! `quality()` 899 to 903 ms with 465.96, `fast()` 198 to 206 ms with 483.24: within 2.8% of
+//! the full sweep's cost at 5.1 to 5.4 times its speed, and a better tree than `fast()` in less
+//! time. The knobs were chosen on that soup (best of 3 each; cost, ms): clusters of 32, 128, 512
+//! with LBVH bottoms 523.6 at 85 ms; with binned bottoms on the longest axis only 484.7 to 483.2
+//! at 164 ms; on all axes everywhere 480.3 (32), 475.6 (128), 473.3 (512) at 205 to 214 ms;
+//! all axes but the longest in the exact sweep of ranges of at most 16 ([`BinAxes::AllButSmall`])
+//! 480.2 (512) and 479.1 (1,024) at 173 to 175 ms. The Morton sort (about 26 ms) stands in for
+//! the top-down builder's first six or so levels, where each level streams the 32 MB of
+//! references through memory twice (about 64 ms of `fast()`'s build); the clusters' binned
+//! builds then run in cache.
 //!
 //! **The bottom-up LBVH** (2026-12-02; same harness, `STRAHL_REPS=7` to `9`, load average about
 //! 1): the 30-bit LBVH now builds its hierarchy in one left-to-right pass over bucket-sorted

@@ -141,7 +141,7 @@ pub(crate) fn subtree(
                 // Small ranges: an exact sweep (cheaper than binning at this size).
                 let axes = match p.bin_axes {
                     BinAxes::All => 7,
-                    BinAxes::Longest => 1 << t.cb.longest_axis().0,
+                    BinAxes::Longest | BinAxes::AllButSmall => 1 << t.cb.longest_axis().0,
                 };
                 binned::find_small(src, axes).map(|(s, order)| {
                     if may_leaf && leaf_cost <= split_cost(p, s.cost, area, count) {
