@@ -156,6 +156,13 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
         ("hlbvh+treelets (hybrid)", BuildParams::hybrid()),
         ("hlbvh-sah (hybrid_sah)", BuildParams::hybrid_sah()),
         (
+            "lbvh30+rotations",
+            BuildParams {
+                refine: Refine::Rotations(1),
+                ..BuildParams::fastest()
+            },
+        ),
+        (
             "binned8-longest+treelets",
             BuildParams {
                 refine: Refine::Treelets(TreeletParams::new()),

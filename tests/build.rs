@@ -100,6 +100,13 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
             },
         ),
         (
+            "lbvh-rotations2",
+            BuildParams {
+                refine: Refine::Rotations(2),
+                ..BuildParams::fastest()
+            },
+        ),
+        (
             "lbvh-treelets8",
             BuildParams {
                 refine: Refine::Treelets(TreeletParams {
@@ -493,6 +500,14 @@ fn invalid_params_are_errors() {
         BuildParams {
             cluster_size: (1 << 16) + 1,
             ..BuildParams::hybrid()
+        },
+        BuildParams {
+            refine: Refine::Rotations(0),
+            ..base
+        },
+        BuildParams {
+            refine: Refine::Rotations(65),
+            ..base
         },
     ]
     .into_iter()

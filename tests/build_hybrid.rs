@@ -1,5 +1,6 @@
 //! The hybrid and refinement builders: HLBVH ([`Strategy::Hlbvh`]), treelet restructuring
-//! ([`Refine::Treelets`], [`Bvh2::optimize_treelets`]) and their preset
+//! ([`Refine::Treelets`], [`Bvh2::optimize_treelets`]), tree rotations ([`Refine::Rotations`],
+//! [`Bvh2::optimize_rotations`]) and their preset
 //! ([`BuildParams::hybrid`]). (Every builder, these included, is also checked against brute
 //! force on random, clustered and adversarial scenes in `tests/build.rs`.)
 
@@ -88,6 +89,80 @@ fn treelets_never_increase_sah_cost() {
             }
         }
     }
+}
+
+/// Rotations after every builder never raise the SAH cost (for several `C_T`, `C_I`), keep the
+/// tree valid, its leaves, slots, node count and root box, respect the depth bound, and do
+/// improve an LBVH.
+#[test]
+fn rotations_never_increase_sah_cost() {
+    let bases = [
+        BuildParams::fastest(),
+        BuildParams::fast(),
+        BuildParams::quality(),
+        BuildParams::median(),
+        BuildParams::hybrid_sah(),
+    ];
+    let mut builder = Builder::new();
+    for (scene, tris) in scenes() {
+        for base in bases {
+            for max_depth in [34, 64] {
+                let base = BuildParams { max_depth, ..base };
+                let (bvh, _) = builder.build(&tris[..], &base).unwrap();
+                for rounds in [1, 3] {
+                    let mut t = bvh.clone();
+                    let stats = t.optimize_rotations(rounds, max_depth).unwrap();
+                    let v = t
+                        .validate(&tris[..])
+                        .unwrap_or_else(|e| panic!("{scene}/{base:?}: {e}"));
+                    assert!(v.max_depth <= max_depth, "{scene}: depth {}", v.max_depth);
+                    assert_eq!(stats.max_depth, v.max_depth, "{scene}");
+                    assert!(stats.rounds <= rounds);
+                    assert_eq!(t.nodes.len(), bvh.nodes.len());
+                    assert_eq!(t.prim_indices, bvh.prim_indices);
+                    assert_eq!(t.nodes[0].aabb(), bvh.nodes[0].aabb(), "the root keeps its box");
+                    let leaves = |b: &Bvh2| {
+                        let mut l: Vec<_> = b.nodes.iter().filter(|n| n.is_leaf()).copied().collect();
+                        l.sort_by_key(|n| n.index);
+                        l
+                    };
+                    assert_eq!(leaves(&t), leaves(&bvh), "leaves are moved, never changed");
+                    for (ct, ci) in [(1.0, 1.0), (4.0, 1.0), (0.5, 2.0)] {
+                        let (before, after) = (bvh.sah_cost(ct, ci), t.sah_cost(ct, ci));
+                        assert!(after <= before, "{scene}/{base:?}/{rounds}: {before} -> {after}");
+                    }
+                }
+            }
+        }
+    }
+    // On the LBVH of a random soup, one round cuts the cost by more than 1%.
+    let soup = scene::thin_soup(20_000, 5);
+    let (mut lbvh, _) = Bvh2::build(&soup[..], &BuildParams::fastest()).unwrap();
+    let before = lbvh.sah_cost(1.0, 1.0);
+    let stats = lbvh.optimize_rotations(1, 64).unwrap();
+    assert!(stats.rotations > 0);
+    assert!(
+        lbvh.sah_cost(1.0, 1.0) < before * 0.99,
+        "{before} -> {}",
+        lbvh.sah_cost(1.0, 1.0)
+    );
+    // Malformed trees are errors, and nothing changes.
+    let mut bad = lbvh.clone();
+    bad.nodes[0].index = bad.nodes.len() as u32;
+    let copy = bad.clone();
+    assert!(bad.optimize_rotations(2, 64).is_err());
+    assert_eq!(bad, copy);
+    let mut twice = lbvh.clone();
+    let l = twice.nodes[0].left();
+    let inner = (1..twice.nodes.len())
+        .find(|&i| !twice.nodes[i].is_leaf() && i as u32 != l)
+        .unwrap();
+    twice.nodes[inner].index = l; // the root's children, reached a second time
+    let copy = twice.clone();
+    assert!(twice.optimize_rotations(1, 64).is_err());
+    assert_eq!(twice, copy);
+    let mut empty = Bvh2::default();
+    assert_eq!(empty.optimize_rotations(1, 64).unwrap().rotations, 0);
 }
 
 /// On an LBVH of a random scene, one round of 7-leaf treelets cuts the SAH cost by several

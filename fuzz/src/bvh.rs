@@ -91,6 +91,10 @@ pub fn builders() -> Vec<BuildParams> {
         },
         BuildParams::hybrid_sah(),
         BuildParams {
+            refine: Refine::Rotations(2),
+            ..BuildParams::fastest()
+        },
+        BuildParams {
             cluster_size: 2,
             morton_bits: MortonBits::Bits63,
             ..BuildParams::hybrid_sah()

@@ -126,6 +126,13 @@ impl Builder {
             forced_splits: c.forced_splits,
             restructured: 0,
         };
+        if let (Refine::Rotations(r), true) = (params.refine, n > 0) {
+            // NOTE: a tree just built is well formed; the pass cannot fail on it.
+            if let Ok(r) = super::rotate::optimize(out, r, params.max_depth) {
+                stats.max_depth = r.max_depth;
+                stats.restructured = r.rotations;
+            }
+        }
         if let (Refine::Treelets(t), true) = (params.refine, n > 0) {
             // NOTE: a tree just built is well formed; the pass cannot fail on it.
             if let Ok(r) = treelet::optimize(out, &t, params.max_depth, &mut self.treelet) {

@@ -17,6 +17,7 @@
 //! | [`Lbvh`](Strategy::Lbvh) | Lauterbach et al. 2009; Karras 2012 | binary search for the highest differing bit | O(n) after a radix sort |
 //! | [`Hlbvh`](Strategy::Hlbvh) | Pantaleoni and Luebke 2010; Garanzha et al. 2011 | LBVH bottoms in clusters of up to [`cluster_size`](BuildParams::cluster_size) codes (SAH leaf collapse), binned SAH over the clusters' boxes on top | O(n) after a radix sort, plus binned SAH over the clusters |
 //! | [`HlbvhSah`](Strategy::HlbvhSah) | HLBVH clusters with Bonsai-style SAH mini-trees (Ganestam et al. 2015) | the binned builder within each cluster, in cache | O(n) sort, plus binned SAH over the clusters and within them |
+//! | [`Refine::Rotations`] (after any of them) | Kensler 2008 | the best of six child/grandchild swaps where it shrinks the two children's boxes | O(n) per round |
 //! | [`Refine::Treelets`] (after any of them) | Karras and Aila 2013 (TRBVH) | best topology of a 3 ..= 8-leaf treelet by dynamic programming over its leaf subsets, `~3^k / 2` steps | O(n) per round |
 //!
 //! The top-down builders share one loop (pbrt's `BUILD(node)`: split, group left and right,
@@ -171,6 +172,13 @@
 //! references through memory twice (about 64 ms of `fast()`'s build); the clusters' binned
 //! builds then run in cache.
 //!
+//! **Tree rotations** ([`Refine::Rotations`], 2026-12-02, same harness with a scratch entry,
+//! best of 3): on the 1M soup one round takes the LBVH from 525.0 to 511.0 and an HLBVH (clusters
+//! of 32, leaves of up to 4) to 491.4, at about 60 ms a round (1.3 to 2 million nodes, 30 to
+//! 45 ns each: the pre-order pass and six candidate unions per node); a second round gains
+//! about 1% more, a fourth 0.3%. Cheaper than treelets of 5 or 7, but on one core not enough
+//! for either tree to overtake the binned builders at equal build time.
+//!
 //! **The bottom-up LBVH** (2026-12-02; same harness, `STRAHL_REPS=7` to `9`, load average about
 //! 1): the 30-bit LBVH now builds its hierarchy in one left-to-right pass over bucket-sorted
 //! references (see `lbvh.rs`): `fastest()` on the 1M soup from 60.2 ms (17.4 Mtri/s) to 44.4 ms
@@ -191,6 +199,7 @@ mod params;
 mod prims;
 pub mod radix;
 mod refit;
+mod rotate;
 mod sweep;
 mod topdown;
 mod treelet;
@@ -202,6 +211,7 @@ pub use params::{
     TreeletParams,
 };
 pub use prims::{MAX_PRIMITIVES, Primitives};
+pub use rotate::RotationStats;
 pub use treelet::TreeletStats;
 pub use validate::{BvhStats, ValidateError};
 

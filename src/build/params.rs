@@ -47,6 +47,10 @@ pub enum Refine {
     /// Treelet restructuring (Karras and Aila 2013), see
     /// [`Bvh2::optimize_treelets`](super::Bvh2::optimize_treelets).
     Treelets(TreeletParams),
+    /// Up to this many rounds (`1 ..= 64`) of tree rotations (Kensler 2008), see
+    /// [`Bvh2::optimize_rotations`](super::Bvh2::optimize_rotations): cheap, local, and never
+    /// worse by the SAH.
+    Rotations(u32),
 }
 
 /// The knobs of treelet restructuring ([`Refine::Treelets`],
@@ -358,6 +362,11 @@ impl BuildParams {
         }
         if !(1..=MAX_CLUSTER_SIZE).contains(&self.cluster_size) {
             return bad("cluster_size must be in 1 ..= 65536");
+        }
+        if let Refine::Rotations(r) = self.refine
+            && !(1..=64).contains(&r)
+        {
+            return bad("refine: rotation rounds must be in 1 ..= 64");
         }
         if let Refine::Treelets(t) = self.refine {
             if !(3..=8).contains(&t.leaves) {
