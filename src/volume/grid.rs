@@ -16,10 +16,11 @@ pub trait Voxel: Pod + Send + Sync + 'static {
     /// The eight corners of eight cells whose x neighbour is the next voxel, converted with
     /// [`to_f32`](Self::to_f32): for lane `l` with `b = base[l]`, corner `c` (bit 0: `+1`, bit 1:
     /// `+oy`, bit 2: `+oz`) is `data[b + (c & 1) + (c >> 1 & 1) oy + (c >> 2) oz]`. An index past
-    /// the end reads as 0 (the volume never asks for one).
+    /// the end reads as 0 or as some voxel of `data` (the volume never asks for one).
     ///
     /// The default loads one voxel at a time; `u8` and `u16` load each x-adjacent pair as one
-    /// wider integer and split the pairs in vector registers. Each corner is an exact conversion,
+    /// wider integer and split the pairs in vector registers; with AVX2, `u8`, `u16` and `f32`
+    /// use gathers. Each corner is an exact conversion,
     /// so every implementation gives the same bits.
     #[doc(hidden)]
     #[inline(always)]
@@ -111,8 +112,9 @@ impl Voxel for u16 {
     }
 }
 
-/// AVX2 gathers of x-adjacent voxel pairs: one `vpgatherdd` per corner pair row, eight lanes at
-/// once, instead of 32 scalar loads and inserts.
+/// AVX2 gathers: of x-adjacent voxel pairs (`u8`, `u16`), one `vpgatherdd` per corner pair row,
+/// or of single `f32` voxels, one per corner; eight lanes at once instead of scalar loads and
+/// inserts.
 #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
 mod gather {
     use crate::math::{f32x8, i32x8};
@@ -162,6 +164,33 @@ mod gather {
         ]
     }
 
+    /// [`Voxel::corners_x8`](super::Voxel::corners_x8) for `f32`: one gather per corner (the
+    /// bits of each voxel, unchanged).
+    // PERF: on an Intel Xeon (AVX-512 machine, AVX2 gathers) the x8 marcher over a dense `f32`
+    // volume ran 2.3x its scalar reference with 64 scalar loads per step and 3.4x with the
+    // gathers; an earlier measurement on an AMD EPYC (Zen 3, slow gathers) found no difference.
+    #[inline(always)]
+    pub(super) fn corners_f32(data: &[f32], base: i32x8, oy: i32, oz: i32) -> [f32x8; 8] {
+        let n = data.len();
+        if n < 2 || n > i32::MAX as usize {
+            return [f32x8::splat(0.0); 8]; // unreachable: a cell has an x neighbour
+        }
+        let hi = n as i32 - 1;
+        let p = data.as_ptr().cast::<u8>();
+        // SAFETY: voxel indices 0..=n - 1 leave one voxel (4 bytes) in `data`.
+        let row = |o: i32| -> f32x8 { bytemuck::cast(unsafe { gather::<4>(p, base + i32x8::splat(o), hi) }) };
+        [
+            row(0),
+            row(1),
+            row(oy),
+            row(oy + 1),
+            row(oz),
+            row(oz + 1),
+            row(oz + oy),
+            row(oz + oy + 1),
+        ]
+    }
+
     /// [`Voxel::corners_x8`](super::Voxel::corners_x8) for `u16`: each pair is exactly one
     /// 32-bit word.
     #[inline(always)]
@@ -189,6 +218,26 @@ impl Voxel for f32 {
     #[inline(always)]
     fn to_f32(self) -> f32 {
         self
+    }
+
+    #[inline(always)]
+    fn corners_x8(data: &[Self], base: i32x8, oy: usize, oz: usize) -> [f32x8; 8] {
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        return gather::corners_f32(data, base, oy as i32, oz as i32);
+        #[allow(unreachable_code)]
+        {
+            // The default: one scalar load per lane and corner.
+            let base = base.to_array();
+            let mut v = [[0.0f32; 8]; 8];
+            let at = |i: usize| data.get(i).copied().unwrap_or(0.0);
+            for l in 0..8 {
+                let b = base[l] as usize;
+                for (c, vc) in v.iter_mut().enumerate() {
+                    vc[l] = at(b + (c & 1) + (c >> 1 & 1) * oy + (c >> 2) * oz);
+                }
+            }
+            v.map(f32x8::new)
+        }
     }
 }
 
