@@ -163,8 +163,11 @@ fn pre_order(bvh: &Bvh2, order: &mut Vec<u32>, depth: &mut [u32]) -> Result<(), 
 }
 
 impl Bvh2 {
-    /// Improves the tree by up to `rounds` rounds of tree rotations (Kensler 2008; see the
-    /// [module docs](self)), keeping every leaf within `max_depth` (clamped to
+    /// Improves the tree by up to `rounds` rounds of tree rotations (Kensler, "Tree Rotations for
+    /// Improving Bounding Volume Hierarchies", 2008): at every interior node, bottom-up, the
+    /// best of the six swaps of a child with a grandchild on the other side, or of two
+    /// grandchildren across, where it shrinks the two children's boxes (it never changes a leaf
+    /// or another box). Keeps every leaf within `max_depth` (clamped to
     /// [`traverse::MAX_DEPTH`](crate::traverse::MAX_DEPTH)). Never raises the SAH cost, for any
     /// `C_T > 0` and `C_I`: a rotation changes no leaf, only the boxes of two interior nodes,
     /// and is applied only where their areas shrink. Errors, without changing the tree, if its
