@@ -47,7 +47,7 @@ use crate::decode::{Input, Mode, negative_zeros};
 use strahl::math::f32x8;
 use strahl::volume::{
     EmptyRegion, GridParams, Lookup, MAX_EMPTY_RADIUS, MAX_STEPS_LIMIT, Macrocell, MacrocellGrid, MarchParams,
-    MarchStats, Medium, Rgba, Sampling, TAU_MAX, TfEntry, TransferFunction, Volume, VolumeError, VolumeMedium, Voxel,
+    COLOR_MAX, MarchStats, Medium, Rgba, Sampling, TAU_MAX, TfEntry, TransferFunction, Volume, VolumeError, VolumeMedium, Voxel,
     integrate, integrate_ray, integrate_scalar, integrate_x8,
 };
 use strahl::{Aabb, Ray, Vec3};
@@ -409,7 +409,7 @@ fn check_typed<V: FuzzVoxel>(case: &VolumeCase, data: &[V]) -> VolumeReport {
     let bad_entry = case
         .table
         .iter()
-        .position(|e| !(e.color.iter().all(|c| c.is_finite()) && e.tau >= 0.0 && e.tau <= TAU_MAX));
+        .position(|e| !(e.color.iter().all(|c| c.abs() <= COLOR_MAX) && e.tau >= 0.0 && e.tau <= TAU_MAX));
     let expected = if !range_ok {
         Err(VolumeError::InvalidRange)
     } else if let Some(index) = bad_entry {
@@ -430,7 +430,7 @@ fn check_typed<V: FuzzVoxel>(case: &VolumeCase, data: &[V]) -> VolumeReport {
         .table
         .iter()
         .map(|e| {
-            if e.color.iter().all(|c| c.is_finite()) && e.tau >= 0.0 && e.tau <= TAU_MAX {
+            if e.color.iter().all(|c| c.abs() <= COLOR_MAX) && e.tau >= 0.0 && e.tau <= TAU_MAX {
                 *e
             } else {
                 TfEntry::TRANSPARENT

@@ -122,7 +122,7 @@ pub use march::{
 };
 pub use medium::{EmptyRegion, Lookup, Medium, Sample, SampleX8, VolumeMedium};
 pub use skip::{GridParams, MAX_EMPTY_RADIUS, Macrocell, MacrocellGrid};
-pub use transfer::{TAU_MAX, TfEntry, TransferFunction, correct_opacity};
+pub use transfer::{COLOR_MAX, TAU_MAX, TfEntry, TransferFunction, correct_opacity};
 
 use bytemuck::{Pod, Zeroable};
 use core::fmt;
@@ -212,8 +212,8 @@ pub enum VolumeError {
     InvalidRange,
     /// A transfer function without entries.
     EmptyTable,
-    /// A transfer function entry with a non-finite colour or an extinction that is NaN, negative or
-    /// above [`TAU_MAX`].
+    /// A transfer function entry with a colour channel that is NaN or beyond `±`[`COLOR_MAX`], or an
+    /// extinction that is NaN, negative or above [`TAU_MAX`].
     InvalidEntry {
         /// Index of the first bad entry.
         index: usize,
@@ -262,7 +262,7 @@ impl fmt::Display for VolumeError {
             Self::EmptyTable => write!(f, "transfer function table has no entries"),
             Self::InvalidEntry { index } => write!(
                 f,
-                "transfer function entry {index}: colour must be finite, extinction in [0, TAU_MAX]"
+                "transfer function entry {index}: colour must be in [-COLOR_MAX, COLOR_MAX], extinction in [0, TAU_MAX]"
             ),
             Self::InvalidBlock => write!(f, "macrocell block size must be a power of two in 2..=64"),
             Self::StorageTooSmall { needed, actual } => {

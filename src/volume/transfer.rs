@@ -8,6 +8,11 @@ use bytemuck::{Pod, Zeroable};
 /// to it, and with any step it gives `a = 1 - exp(-tau dt) = 1` in `f32`.
 pub const TAU_MAX: f32 = 1.267_650_6e30;
 
+/// Largest `|c|` a colour channel of an entry may hold: `2^100`. Bounded so that interpolating two
+/// entries, `a + (b - a) w`, never overflows (`+MAX` beside `-MAX` would give `inf - inf = NaN`),
+/// and an accumulated colour stays below it too (its weights `(1 - A) a` sum to at most 1).
+pub const COLOR_MAX: f32 = 1.267_650_6e30;
+
 /// One transfer function entry in physical form: emitted colour `c` (not premultiplied) and
 /// extinction `tau` per world unit. See the [module docs](super) for the convention.
 ///
@@ -147,8 +152,8 @@ impl<'a> TransferFunction<'a> {
     ///
     /// Errors: [`VolumeError::EmptyTable`] for no entries (or more than
     /// [`MAX_ENTRIES`](Self::MAX_ENTRIES)), [`VolumeError::InvalidRange`] unless `lo < hi` are
-    /// finite, [`VolumeError::InvalidEntry`] for a non-finite colour or an extinction that is NaN,
-    /// negative or above [`TAU_MAX`].
+    /// finite, [`VolumeError::InvalidEntry`] for a colour channel that is NaN or beyond
+    /// `±`[`COLOR_MAX`], or an extinction that is NaN, negative or above [`TAU_MAX`].
     pub fn new(entries: &'a [TfEntry], lo: f32, hi: f32) -> Result<Self, VolumeError> {
         if entries.is_empty() || entries.len() > Self::MAX_ENTRIES {
             return Err(VolumeError::EmptyTable);
@@ -156,10 +161,9 @@ impl<'a> TransferFunction<'a> {
         if !(lo.is_finite() && hi.is_finite() && lo < hi && (hi - lo).is_finite()) {
             return Err(VolumeError::InvalidRange);
         }
-        if let Some(index) = entries
-            .iter()
-            .position(|e| !(e.color.iter().all(|c| c.is_finite()) && e.tau >= 0.0 && e.tau <= TAU_MAX))
-        {
+        if let Some(index) = entries.iter().position(|e| {
+            !(e.color.iter().all(|c| crate::math::abs(*c) <= COLOR_MAX) && e.tau >= 0.0 && e.tau <= TAU_MAX)
+        }) {
             return Err(VolumeError::InvalidEntry { index });
         }
         let last_idx = entries.len() as i32 - 1;
@@ -326,12 +330,39 @@ mod tests {
             TfEntry::new([0.0; 3], -1.0),
             TfEntry::new([0.0; 3], f32::NAN),
             TfEntry::new([0.0; 3], f32::INFINITY),
+            TfEntry::new([0.0, f32::MAX, 0.0], 1.0),
+            TfEntry::new([0.0, 0.0, -2.0 * COLOR_MAX], 0.0),
+            TfEntry::new([f32::NEG_INFINITY, 0.0, 0.0], 0.0),
         ] {
             let t = [TfEntry::TRANSPARENT, bad];
             assert_eq!(
                 TransferFunction::new(&t, 0.0, 1.0).unwrap_err(),
                 VolumeError::InvalidEntry { index: 1 }
             );
+        }
+    }
+
+    #[test]
+    fn extreme_colours_interpolate_to_finite_values() {
+        // +COLOR_MAX beside -COLOR_MAX: `a + (b - a) w` must not overflow anywhere in between (the
+        // fuzzer found `+MAX`/`-MAX` entries giving NaN at w = 0 before COLOR_MAX was enforced).
+        let m = COLOR_MAX;
+        let t = [
+            TfEntry::new([m, -m, m], 0.0),
+            TfEntry::new([-m, m, m], 0.0),
+            TfEntry::new([m, -m, -m], 1.0),
+        ];
+        let tf = TransferFunction::new(&t, 0.0, 2.0).unwrap();
+        for i in 0..=64 {
+            let s = i as f32 / 32.0;
+            let (tau, c) = tf.lookup_scalar(s);
+            assert!(
+                tau.is_finite() && c.iter().all(|c| c.is_finite() && c.abs() <= m),
+                "{s}: {c:?}"
+            );
+            let (tau8, c8) = tf.lookup_x8(f32x8::splat(s));
+            assert_eq!(tau8.to_array()[3].to_bits(), tau.to_bits());
+            assert_eq!(c8.map(|c| c.to_array()[5].to_bits()), c.map(f32::to_bits));
         }
     }
 
