@@ -200,6 +200,7 @@ mod prims;
 pub mod radix;
 mod refit;
 mod rotate;
+mod small;
 mod sweep;
 mod topdown;
 mod treelet;

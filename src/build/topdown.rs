@@ -5,12 +5,14 @@
 //! The references live in two buffers of the same length. A task's range is valid in one of them;
 //! the binned partition moves it to the same range of the other (branch-free, see
 //! [`binned`](super::binned)), so the children's ranges are valid there; ranges of at most
-//! [`binned::SMALL`] references take an exact sweep instead of binning. The median split reorders
-//! in place. A leaf copies its primitive indices straight from whichever buffer holds it.
+//! [`binned::SMALL`] references take an exact sweep instead of binning, their whole subtree at
+//! once in local arrays ([`small`](super::small)) where the depth bound cannot bind. The median
+//! split reorders in place. A leaf copies its primitive indices straight from whichever buffer holds it.
 
 use super::binned::{self, Binning, Bins};
 use super::builder::{Builder, Counters};
 use super::prims::{Box8, CBounds, PrepInfo, PrimRef, depth_ok};
+use super::small;
 use super::{BinAxes, BuildParams, Bvh2, Strategy};
 use alloc::vec::Vec;
 
@@ -113,6 +115,23 @@ pub(crate) fn subtree(
     stack: &mut Vec<Task>,
     c: &mut Counters,
 ) {
+    subtree_with::<true>(refs, alt, p, out, root, bins, stack, c);
+}
+
+/// [`subtree`]; `LOCAL_SMALL`: small ranges go to [`small::subtree`] (`false`: the task loop
+/// builds them with the same splits, node by node; kept as the reference the tests and the speed
+/// harness compare with).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
+    refs: &mut [PrimRef],
+    alt: &mut [PrimRef],
+    p: &BuildParams,
+    out: &mut Bvh2,
+    root: Task,
+    bins: &mut Bins,
+    stack: &mut Vec<Task>,
+    c: &mut Counters,
+) {
     let bins = &mut *bins;
     let c = &mut *c;
     stack.clear();
@@ -137,6 +156,14 @@ pub(crate) fn subtree(
 
         // Find a split, or decide on a leaf. `None`: all centroids coincide.
         let found: Option<Option<Split>> = match p.strategy {
+            Strategy::BinnedSah
+                if LOCAL_SMALL && count as usize <= binned::SMALL && count >= 2 && t.depth + count <= p.max_depth =>
+            {
+                // The whole subtree in local arrays (the same splits as the branch below).
+                let all = p.bin_axes == BinAxes::All;
+                small::subtree(src, t.begin, [t.node, t.depth], t.bounds, t.cb, all, p, out, c);
+                continue;
+            }
             Strategy::BinnedSah if count as usize <= binned::SMALL => {
                 // Small ranges: an exact sweep (cheaper than binning at this size).
                 let axes = match p.bin_axes {
