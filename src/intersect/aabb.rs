@@ -107,7 +107,8 @@ pub fn intersect_aabb_scalar(ray: &PreparedRay, b: &Aabb) -> Option<f32> {
     let mut far = ray.tmax;
     // Walk the axes from z to x so the reduction order matches the lane kernels.
     for a in (0..3).rev() {
-        let (lo, hi) = if ray.neg[a] {
+        // The sign of `inv_dir[a]` is `neg[a]`, read as the lane kernels do.
+        let (lo, hi) = if ray.inv_dir[a].is_sign_negative() {
             (b.max[a], b.min[a])
         } else {
             (b.min[a], b.max[a])

@@ -36,12 +36,12 @@ pub(super) fn lane_mask<R: Lane, const K: usize>(bits: u32) -> R {
 /// planes (found by the `bvh` fuzz target on an SSE2 build: a packet lane missed a hit).
 #[inline(always)]
 pub(super) fn sign_lanes<R: Lane, const K: usize>(single: &[PreparedRay; K]) -> [R; 3] {
+    // The sign of `inv_dir` is the direction's (`neg`); an arithmetic shift spreads it over the
+    // lane, without a branch.
     let mut s = [[0f32; K]; 3];
     for (i, r) in single.iter().enumerate() {
-        for (axis, &neg) in s.iter_mut().zip(&r.neg) {
-            if neg {
-                axis[i] = f32::from_bits(u32::MAX);
-            }
+        for (axis, inv) in s.iter_mut().zip(r.inv_dir.to_array()) {
+            axis[i] = f32::from_bits(((inv.to_bits() as i32) >> 31) as u32);
         }
     }
     [R::load(&s[0]), R::load(&s[1]), R::load(&s[2])]
@@ -170,6 +170,7 @@ pub(super) fn coherent<L: Lane, const N: usize, const K: usize>(
     active: u32,
 ) -> bool {
     let first = &single[active.trailing_zeros() as usize % K];
+    let signs = first.sign_bits();
     let d0 = first.direction;
     let (l0, cos2) = (d0.length_squared(), super::COHERENT_MIN_COS * super::COHERENT_MIN_COS);
     let (mut lo, mut hi) = (first.origin, first.origin);
@@ -179,7 +180,7 @@ pub(super) fn coherent<L: Lane, const N: usize, const K: usize>(
         }
         // `cos >= COHERENT_MIN_COS` without square roots: `d.d0 >= 0` and `(d.d0)^2 >= cos^2 |d|^2 |d0|^2`.
         let dot = r.direction.dot(d0);
-        if r.neg != first.neg || !(dot >= 0.0 && dot * dot >= cos2 * (l0 * r.direction.length_squared())) {
+        if r.sign_bits() != signs || !(dot >= 0.0 && dot * dot >= cos2 * (l0 * r.direction.length_squared())) {
             return false;
         }
         (lo, hi) = (lo.min(r.origin), hi.max(r.origin));
@@ -203,6 +204,67 @@ pub(super) fn coherent<L: Lane, const N: usize, const K: usize>(
         extent = extent.max(mx - mn);
     }
     (hi - lo).max_element() <= extent * super::COHERENT_MAX_ORIGIN_SPREAD
+}
+
+/// The lanes of up to `K` rays whose slab test, as single-ray traversal runs it at the root,
+/// enters one of the root's children; `0` for an empty tree. Computed for all lanes at once from
+/// the rays themselves (the same flushed direction, reciprocal, interval and validity as
+/// [`PreparedRay::new`]), so that a packet that misses the scene, as most primary rays of a
+/// small object do, costs one pass of lane arithmetic and no per-ray setup.
+#[inline(always)]
+pub(super) fn root_lanes<L: Lane, const N: usize, R: Lane, const K: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+) -> u32 {
+    let Some(root) = bvh.nodes.first() else {
+        return 0;
+    };
+    // Rays to lanes; lanes past `rays` are invalid (a NaN origin).
+    let (mut o, mut d) = ([[f32::NAN; K]; 3], [[1.0f32; K]; 3]);
+    let (mut tmin, mut tmax) = ([0f32; K], [0f32; K]);
+    for (i, r) in rays.iter().take(K).enumerate() {
+        for a in 0..3 {
+            o[a][i] = r.origin[a];
+            d[a][i] = r.direction[a];
+        }
+        (tmin[i], tmax[i]) = (r.tmin, r.tmax);
+    }
+    let load3 = |v: &[[f32; K]; 3]| [R::load(&v[0]), R::load(&v[1]), R::load(&v[2])];
+    let (origin, raw) = (load3(&o), load3(&d));
+    let (tmin, tmax) = (R::load(&tmin), R::load(&tmax));
+    let (zero, inf) = (R::splat(0.0), R::splat(f32::INFINITY));
+    // Valid (`Ray::is_valid`, the flushed direction not zero): finite origin and direction,
+    // no NaN bound.
+    let mut valid = tmin.eq(tmin) & tmax.eq(tmax);
+    let mut moving = zero.ne(zero);
+    let mut inv = [zero; 3];
+    for a in 0..3 {
+        // Subnormal components flushed to a zero of their sign, as `PreparedRay::new` does.
+        let flushed = raw[a]
+            .abs()
+            .lt(R::splat(f32::MIN_POSITIVE))
+            .select(zero.xor_sign(raw[a]), raw[a]);
+        valid = valid & origin[a].abs().lt(inf) & raw[a].abs().lt(inf);
+        moving = moving | flushed.ne(zero);
+        inv[a] = R::splat(1.0) / flushed;
+    }
+    let valid = valid & moving;
+    let (tmin, tmax) = (valid.select(tmin, inf), valid.select(tmax, R::splat(f32::NEG_INFINITY)));
+    // Full lane masks of the reciprocal's sign (what `neg` holds); invalid lanes miss anyway.
+    let neg = inv.map(|v| v.lt(zero));
+    let (mut lo, mut hi) = ([[0f32; N]; 3], [[0f32; N]; 3]);
+    for a in 0..3 {
+        root.bounds.min[a].store(&mut lo[a]);
+        root.bounds.max[a].store(&mut hi[a]);
+    }
+    let mut enter = 0u32;
+    for (c, &child) in root.child.iter().enumerate() {
+        if child != EMPTY_CHILD {
+            let b = |v: &[[f32; N]; 3]| [v[0][c], v[1][c], v[2][c]];
+            enter |= box_slabs(&origin, &inv, tmin, tmax, &neg, b(&lo), b(&hi)).1;
+        }
+    }
+    enter & valid.bitmask() & ((1u64 << rays.len().min(K)) - 1) as u32
 }
 
 /// Prepares up to `K` rays; lanes past `rays` are [`PreparedRay::EMPTY`].
@@ -232,6 +294,11 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     switch: u32,
 ) {
     let n = rays.len().min(hits.len()).min(K);
+    if root_lanes::<L, N, R, K>(bvh, &rays[..n]) == 0 {
+        // No lane enters the scene.
+        hits[..n].fill(None);
+        return;
+    }
     let mut single = prepare::<K>(&rays[..n]);
     let mut best: [Option<Hit>; K] = [None; K];
     let active = active_of(&single);
@@ -276,6 +343,10 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
     switch: u32,
 ) {
     let n = rays.len().min(occluded.len()).min(K);
+    if root_lanes::<L, N, R, K>(bvh, &rays[..n]) == 0 {
+        occluded[..n].fill(false);
+        return;
+    }
     let mut single = prepare::<K>(&rays[..n]);
     let active = active_of(&single);
     let mut mask = 0u32;
@@ -611,7 +682,8 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
     let mut p = Slabs::<R>::new(single);
     let mut occluded = 0u32;
     let mut iv = Interval::new(single, active);
-    let neg = single[active.trailing_zeros() as usize % K].neg;
+    let signs = single[active.trailing_zeros() as usize % K].sign_bits();
+    let neg = [signs & 1 != 0, signs & 2 != 0, signs & 4 != 0];
     let slack = L::splat(FAR_SLACK);
     let mut stack = MaskStack::<STACK>::new();
     let mut cur = 0u32;
@@ -740,5 +812,98 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                 Some(_) => {}
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::build::{BuildParams, Bvh2};
+    use crate::intersect::aabb::intersect_aabb_lanes;
+    use crate::layout::{Bvh4, Bvh8};
+    use crate::math::{f32x4, f32x8};
+    use crate::scene::Rng;
+    use glam::Vec3;
+
+    /// Single-ray traversal's root test: the children of node 0 that the prepared ray enters.
+    fn enters<L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, ray: &Ray) -> bool {
+        let r = PreparedRay::new(ray);
+        let root = &bvh.nodes[0];
+        let mask = intersect_aabb_lanes(&r, &root.bounds).1;
+        (0..N).any(|c| mask >> c & 1 == 1 && root.child[c] != EMPTY_CHILD)
+    }
+
+    /// Rays from a pool of special and ordinary values, aimed at the scene or anywhere.
+    fn rays(rng: &mut Rng, n: usize) -> alloc::vec::Vec<Ray> {
+        let specials = [
+            0.0,
+            -0.0,
+            1e-39,
+            -1e-39,
+            1e-45,
+            f32::MIN_POSITIVE,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            0.5,
+            -2.0,
+        ];
+        let mut v = |rng: &mut Rng| {
+            if rng.u64() % 4 == 0 {
+                specials[(rng.u64() % specials.len() as u64) as usize]
+            } else {
+                rng.range(-3.0, 3.0)
+            }
+        };
+        (0..n)
+            .map(|i| {
+                let origin = Vec3::new(v(rng), v(rng), v(rng));
+                let toward = Vec3::new(rng.range(0.0, 1.0), rng.range(0.0, 1.0), rng.range(0.0, 1.0)) - origin;
+                let direction = if i % 3 == 0 {
+                    toward
+                } else {
+                    Vec3::new(v(rng), v(rng), v(rng))
+                };
+                Ray {
+                    origin,
+                    direction,
+                    tmin: if i % 5 == 0 { v(rng) } else { 0.0 },
+                    tmax: if i % 7 == 0 { v(rng) } else { f32::INFINITY },
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn root_lanes_are_the_single_ray_root_test() {
+        let tris = crate::scene::thin_soup(300, 4);
+        let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+        let (b4, b8) = (
+            Bvh4::from_bvh2(&b2, &tris[..]).unwrap(),
+            Bvh8::from_bvh2(&b2, &tris[..]).unwrap(),
+        );
+        let mut rng = Rng::new(21);
+        let mut entered = 0;
+        for round in 0..3000 {
+            let rs = rays(&mut rng, 1 + round % 16);
+            let want = |n: usize, f: &dyn Fn(&Ray) -> bool| {
+                rs.iter()
+                    .take(n)
+                    .enumerate()
+                    .fold(0u32, |m, (i, r)| m | (f(r) as u32) << i)
+            };
+            let w8 = want(8, &|r| enters(b8.view(), r));
+            assert_eq!(root_lanes::<f32x8, 8, f32x8, 8>(b8.view(), &rs), w8, "{rs:?}");
+            assert_eq!(root_lanes::<f32x8, 8, f32x4, 4>(b8.view(), &rs), w8 & 0xf, "{rs:?}");
+            let w4 = want(16, &|r| enters(b4.view(), r));
+            assert_eq!(
+                root_lanes::<f32x4, 4, crate::math::f32x16, 16>(b4.view(), &rs),
+                w4,
+                "{rs:?}"
+            );
+            entered += w8.count_ones();
+        }
+        assert!(entered > 3000, "too few rays enter the scene to test much: {entered}");
     }
 }
