@@ -253,7 +253,7 @@ mod tests {
         let mut rng = crate::scene::Rng::new(9);
         for i in 0..20_000 {
             let mut pick = || {
-                if rng.u64() % 3 == 0 {
+                if rng.u64().is_multiple_of(3) {
                     specials[(rng.u64() % specials.len() as u64) as usize]
                 } else {
                     rng.range(-2.0, 2.0)

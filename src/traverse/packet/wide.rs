@@ -849,8 +849,8 @@ mod tests {
             0.5,
             -2.0,
         ];
-        let mut v = |rng: &mut Rng| {
-            if rng.u64() % 4 == 0 {
+        let v = |rng: &mut Rng| {
+            if rng.u64().is_multiple_of(4) {
                 specials[(rng.u64() % specials.len() as u64) as usize]
             } else {
                 rng.range(-3.0, 3.0)
