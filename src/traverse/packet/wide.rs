@@ -267,6 +267,18 @@ pub(super) fn root_lanes<L: Lane, const N: usize, R: Lane, const K: usize>(
     enter & valid.bitmask() & ((1u64 << rays.len().min(K)) - 1) as u32
 }
 
+/// `true` if the hybrid will send these rays to single-ray traversal at the root whatever they
+/// hit: their directions' signs differ (so [`coherent`] fails) and there are fewer than `switch`.
+/// Such packets (diffuse bounces, shadow rays from scattered points) go to single rays at once,
+/// without the packet's setup or [`root_lanes`], which would cost them time and save none. Only
+/// speed depends on it: every path answers as single rays do.
+#[inline(always)]
+fn to_singles(rays: &[Ray], switch: u32) -> bool {
+    let signs = |r: &Ray| r.direction.is_negative_bitmask();
+    let first = rays.first().map_or(0, signs);
+    (rays.len() as u32) < switch && rays.iter().any(|r| signs(r) != first)
+}
+
 /// Prepares up to `K` rays; lanes past `rays` are [`PreparedRay::EMPTY`].
 #[inline(always)]
 pub(super) fn prepare<const K: usize>(rays: &[Ray]) -> [PreparedRay; K] {
@@ -294,6 +306,13 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     switch: u32,
 ) {
     let n = rays.len().min(hits.len()).min(K);
+    if to_singles(&rays[..n], switch) {
+        // The hybrid's answer at the root, without the packet's setup.
+        for (h, r) in hits[..n].iter_mut().zip(rays) {
+            *h = crate::traverse::wide::intersect::<T, L, N>(bvh, r);
+        }
+        return;
+    }
     if root_lanes::<L, N, R, K>(bvh, &rays[..n]) == 0 {
         // No lane enters the scene.
         hits[..n].fill(None);
@@ -343,6 +362,12 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
     switch: u32,
 ) {
     let n = rays.len().min(occluded.len()).min(K);
+    if to_singles(&rays[..n], switch) {
+        for (o, r) in occluded[..n].iter_mut().zip(rays) {
+            *o = crate::traverse::wide::occluded::<T, L, N>(bvh, r);
+        }
+        return;
+    }
     if root_lanes::<L, N, R, K>(bvh, &rays[..n]) == 0 {
         occluded[..n].fill(false);
         return;
