@@ -15,8 +15,11 @@
 //! **Small ranges** (at most [`SMALL`] = 16 references) are split by an exact sweep instead
 //! ([`find_small`]): binning costs about 100 ns per node in bin resets and sweeps, which
 //! dominated the build when half the nodes hold 2 or 3 references. The top-down builder builds
-//! such a range's whole subtree at once with the same sweep ([`small`](super::small)). (At 8, the limit before, the
-//! builds ran as many instructions on the soup, with a tree 0.04 to 0.1% worse by the SAH.)
+//! such a range's whole subtree at once with the same sweep ([`small`](super::small)). (At 8, the
+//! limit before, the builds ran as many instructions on the soup, with a tree 0.04 to 0.1% worse
+//! by the SAH. At 32, tried with the local builder on 2026-12-02: `fast()` as fast with a tree
+//! 0.13% better, `balanced()` 3% slower, `hybrid_sah()` 5% faster but 0.3% worse, as its longest-
+//! axis-only sweep then reaches ranges of 17 to 32; not kept.)
 //!
 //! **Partition.** The references move to the other of two buffers, branch-free: each is written
 //! to both the next left and the next right slot, and one of the two cursors advances; the
@@ -26,6 +29,14 @@
 //! the first right reference) 241 ms; in place with a branch per reference (Hoare) 373 ms, from
 //! mispredictions. The second buffer costs `32 n` bytes, allocated once per
 //! [`Builder`](super::Builder), never per node.
+//!
+//! Tried and dropped (2026-12-02, AMD EPYC): binning the children inside the partition pass, into
+//! per-child bins that also carry each bin's centroid bounds (from which the children's binning
+//! grids are known exactly before the pass, so the trees came out node for node the same), which
+//! saves one of the two passes over the references per level. The whole `fast()` build of the 1M
+//! soup went from 116 to 139 ms, and to 147 ms with two bin sets per child: the fused loop's bin
+//! loads waited on its reference stores (37% of its samples on one bin store), which the
+//! separate binning loop never does.
 
 use super::params::MAX_BINS;
 use super::prims::{Box8, CBounds, PrimRef};
