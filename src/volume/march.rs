@@ -396,6 +396,12 @@ pub fn integrate_scalar<M: Medium>(
     Ok(stats)
 }
 
+/// How many steps ahead [`integrate_x8`] prefetches voxels ([`Medium::prefetch_x8`]).
+// PERF: dense Marschner-Lobb 128^3, x8, best of 15 x 3 runs alternating (AMD EPYC, AVX-512):
+// f32 (8 MB) 18.7 -> 16.1 ms, u16 15.1 -> 13.6 ms, u8 (2 MB) 12.7 -> 12.4 ms; prefetching every
+// step instead cost u8 5% (13.4 ms); 4, 8 and 16 steps ahead measured alike.
+const PREFETCH_STEPS: f32 = 6.0;
+
 #[inline(always)]
 fn set_lane(v: &mut f32x8, l: usize, x: f32) {
     let mut a = v.to_array();
@@ -535,6 +541,8 @@ pub fn integrate_x8<M: Medium>(
     let thr = f32x8::splat(ctx.thr);
     let (zero, one, half) = (f32x8::splat(0.0), f32x8::splat(1.0), f32x8::splat(0.5));
     let mut regions = [EmptyRegion::default(); 8];
+    let ahead = f32x8::splat(ctx.dt * PREFETCH_STEPS);
+    let mut prefetch_now = false;
     let mut v = ln.v;
     loop {
         // Lanes with a ray, samples left and opacity below the threshold.
@@ -548,6 +556,13 @@ pub fn integrate_x8<M: Medium>(
         let h = dt.min_l(v.len - s0).max_l(zero);
         let s = if ctx.mid { s0 + half * h } else { s0 };
         let g = [v.ge[0] + v.gd[0] * s, v.ge[1] + v.gd[1] * s, v.ge[2] + v.gd[2] * s];
+        // PERF: every second step, ask for the voxels PREFETCH_STEPS ahead (their lines serve two
+        // steps of half a voxel). See PREFETCH_STEPS for the figures.
+        prefetch_now = !prefetch_now;
+        if prefetch_now {
+            let sp = s + ahead;
+            m.prefetch_x8(&[v.ge[0] + v.gd[0] * sp, v.ge[1] + v.gd[1] * sp, v.ge[2] + v.gd[2] * sp]);
+        }
         match m.lookup_x8(&g, active, &mut regions) {
             Err(mask) => {
                 // Some lanes are in empty regions: move them on, then look again.

@@ -93,6 +93,13 @@ pub trait Medium {
     /// Extinction and colour at local position `g`, or the empty region around it.
     fn lookup(&self, g: Vec3) -> Lookup;
 
+    /// A hint: asks the cache for what [`lookup_x8`](Self::lookup_x8) at `g` will read, a few
+    /// steps before it does. Changes no result; the default does nothing.
+    #[inline(always)]
+    fn prefetch_x8(&self, g: &[f32x8; 3]) {
+        let _ = g;
+    }
+
     /// Eight lookups. Lanes not set in `active` are not looked at. Returns the samples, or, if any
     /// active lane lies in an empty region, the mask of those lanes (their regions written to
     /// `empty`). Must agree with [`lookup`](Self::lookup) lane by lane, bit for bit.
@@ -223,6 +230,11 @@ impl<V: Voxel> Medium for VolumeMedium<'_, V> {
         let s = self.vol.interp_scalar(&cell);
         let (tau, color) = self.tf.lookup_scalar(s);
         Lookup::Sample(Sample { tau, color })
+    }
+
+    #[inline(always)]
+    fn prefetch_x8(&self, g: &[f32x8; 3]) {
+        self.vol.prefetch_x8(*g);
     }
 
     #[inline(always)]

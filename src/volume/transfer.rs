@@ -238,7 +238,7 @@ impl<'a> TransferFunction<'a> {
         let u = ((s - f32x8::splat(self.lo)) * f32x8::splat(self.scale))
             .max_l(f32x8::splat(0.0))
             .min_l(f32x8::splat(self.last));
-        let j = u.trunc_int().min(i32x8::splat(self.last_idx - 1));
+        let j = u.fast_trunc_int().min(i32x8::splat(self.last_idx - 1));
         let w = u - j.round_float();
         let j = j.to_array();
         // PERF: entries j and j + 1 are 8 adjacent floats: one unaligned load per lane, then an
