@@ -119,18 +119,16 @@ pub(crate) fn closest_lane<L: Lane>(mask: u32, t: L, u: L, v: L, prim: &[u32]) -
     if mask == 0 {
         return None;
     }
-    // Branch-free: the minimum over the masked lanes (hit distances are never NaN), then the
-    // lowest masked lane holding it.
-    let mut ta = [0.0f32; 8];
-    t.store(&mut ta);
-    let mut best = f32::INFINITY;
-    for (i, &x) in ta.iter().enumerate().take(L::N) {
-        let x = if mask >> i & 1 != 0 { x } else { f32::INFINITY };
-        best = if x < best { x } else { best };
-    }
-    let lane = (t.eq(L::splat(best)).bitmask() & mask).trailing_zeros() as usize;
+    // Branch-free, in registers: the minimum over the masked lanes (hit distances are never NaN,
+    // and finite: t < tmax), then the lowest masked lane holding it; its own `t`, so that of a
+    // -0.0 and a 0.0 the lower lane's is reported, whichever the reduction kept.
+    // PERF: a scalar loop over the stored lanes was 12% of coherent packet traversal's profile
+    // (bunny primary rays, 8-ray packets, whose leaves run this per lane and pack).
+    let tm = L::from_bitmask(mask).select(t, L::splat(f32::INFINITY));
+    let best = tm.min_lane();
+    let lane = (tm.eq(L::splat(best)).bitmask() & mask).trailing_zeros() as usize;
     Some(Hit {
-        t: best,
+        t: t.lane(lane),
         u: u.lane(lane),
         v: v.lane(lane),
         prim: prim[lane],

@@ -3,7 +3,7 @@
 //! [`math`](crate::math)).
 
 use core::ops::{Add, BitAnd, BitOr, Div, Mul, Sub};
-use wide::{f32x4, f32x8, f32x16};
+use wide::{f32x4, f32x8, f32x16, i32x4, i32x8, i32x16};
 
 /// A vector of `N` `f32` lanes. Comparison results are lane masks of the same type (all bits set
 /// where true), combined with `&` and `|`.
@@ -53,10 +53,16 @@ pub trait Lane:
     fn xor_sign(self, sign: Self) -> Self;
     /// Clears the sign bits.
     fn abs(self) -> Self;
+    /// A lane mask from bits: all bits set in lane `i` where bit `i` of `bits` is set, zero
+    /// elsewhere (the inverse of [`bitmask`](Self::bitmask) on masks).
+    fn from_bitmask(bits: u32) -> Self;
+    /// The smallest lane, folded pairwise with [`min_l`](Self::min_l)'s rule (for NaN-free
+    /// lanes: the minimum; which of `-0.0` and `0.0` it returns is unspecified).
+    fn min_lane(self) -> f32;
 }
 
 macro_rules! impl_lane {
-    ($t:ty, $n:expr) => {
+    ($t:ty, $i:ty, $n:expr) => {
         impl Lane for $t {
             const N: usize = $n;
             #[inline(always)]
@@ -140,13 +146,32 @@ macro_rules! impl_lane {
             fn abs(self) -> Self {
                 <$t>::abs(self)
             }
+            #[inline(always)]
+            fn from_bitmask(bits: u32) -> Self {
+                let pow2: [i32; $n] = core::array::from_fn(|i| 1 << i);
+                let pow2 = <$i>::new(pow2);
+                bytemuck::cast((<$i>::splat(bits as i32) & pow2).simd_eq(pow2))
+            }
+            #[inline(always)]
+            fn min_lane(self) -> f32 {
+                // A tree: halves, then quarters, as a horizontal reduction in registers.
+                let mut a = self.to_array();
+                let mut w = $n / 2;
+                while w > 0 {
+                    for i in 0..w {
+                        a[i] = crate::math::min_l(a[i], a[i + w]);
+                    }
+                    w /= 2;
+                }
+                a[0]
+            }
         }
     };
 }
 
-impl_lane!(f32x4, 4);
-impl_lane!(f32x8, 8);
-impl_lane!(f32x16, 16);
+impl_lane!(f32x4, i32x4, 4);
+impl_lane!(f32x8, i32x8, 8);
+impl_lane!(f32x16, i32x16, 16);
 
 #[cfg(test)]
 mod tests {
@@ -173,10 +198,37 @@ mod tests {
         }
     }
 
+    /// `from_bitmask` inverts `bitmask` on every mask, and `min_lane` is the minimum of NaN-free
+    /// lanes wherever the smallest value sits (checked with every lane in turn as the minimum,
+    /// among values that repeat).
+    fn check_masks_and_min<L: Lane>() {
+        let n = L::N as u32;
+        for bits in 0..(1u32 << n).min(1 << 16) {
+            let m = L::from_bitmask(bits);
+            assert_eq!(m.bitmask(), bits);
+            for i in 0..L::N {
+                let all = m.lane(i).to_bits() == u32::MAX;
+                assert!(all == (bits >> i & 1 == 1) && (all || m.lane(i).to_bits() == 0));
+            }
+        }
+        for lo in 0..L::N {
+            let mut v = [0f32; 16];
+            for (i, x) in v.iter_mut().enumerate().take(L::N) {
+                *x = [3.0, f32::INFINITY, 1.5, 2.0][i % 4];
+            }
+            v[lo] = -7.25;
+            assert_eq!(L::load(&v).min_lane(), -7.25);
+        }
+        assert_eq!(L::splat(f32::INFINITY).min_lane(), f32::INFINITY);
+    }
+
     #[test]
     fn lanes_match_scalar_semantics() {
         check::<f32x4>();
         check::<f32x8>();
         check::<f32x16>();
+        check_masks_and_min::<f32x4>();
+        check_masks_and_min::<f32x8>();
+        check_masks_and_min::<f32x16>();
     }
 }
