@@ -298,6 +298,46 @@ fn active_of<const K: usize>(single: &[PreparedRay; K]) -> u32 {
         .fold(0, |m, (i, r)| m | ((r.tmin < r.tmax) as u32) << i)
 }
 
+/// How a packet starts, decided once for [`intersect`] and [`occluded`].
+enum Start<const K: usize> {
+    /// The hybrid's answer at the root, without the packet's setup: every ray as a single ray.
+    Singles,
+    /// No lane enters the scene (or none has a ray): every answer is a miss.
+    Miss,
+    /// The prepared lanes, those with a ray (`active`), and whether they are [`coherent`].
+    Prepared {
+        single: [PreparedRay; K],
+        active: u32,
+        coherent: bool,
+    },
+}
+
+#[inline(always)]
+fn start<L: Lane, const N: usize, R: Lane, const K: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    switch: u32,
+) -> Start<K> {
+    if to_singles(rays, switch) {
+        return Start::Singles;
+    }
+    // `root_lanes` is 0 for an empty tree too.
+    if root_lanes::<L, N, R, K>(bvh, rays) == 0 {
+        return Start::Miss;
+    }
+    let single = prepare::<K>(rays);
+    let active = active_of(&single);
+    if active == 0 {
+        return Start::Miss;
+    }
+    let coherent = coherent(bvh, &single, active);
+    Start::Prepared {
+        single,
+        active,
+        coherent,
+    }
+}
+
 /// Closest hits of up to `K` rays (see [`intersect_packet`](super::intersect_packet)).
 pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
     bvh: BvhWideRef<'_, L, N>,
@@ -306,47 +346,47 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     switch: u32,
 ) {
     let n = rays.len().min(hits.len()).min(K);
-    if to_singles(&rays[..n], switch) {
-        // The hybrid's answer at the root, without the packet's setup.
-        for (h, r) in hits[..n].iter_mut().zip(rays) {
-            *h = crate::traverse::wide::intersect::<T, L, N>(bvh, r);
+    let (mut single, active, coherent) = match start::<L, N, R, K>(bvh, &rays[..n], switch) {
+        Start::Singles => {
+            for (h, r) in hits[..n].iter_mut().zip(rays) {
+                *h = crate::traverse::wide::intersect::<T, L, N>(bvh, r);
+            }
+            return;
         }
-        return;
-    }
-    if root_lanes::<L, N, R, K>(bvh, &rays[..n]) == 0 {
-        // No lane enters the scene.
-        hits[..n].fill(None);
-        return;
-    }
-    let mut single = prepare::<K>(&rays[..n]);
+        Start::Miss => {
+            hits[..n].fill(None);
+            return;
+        }
+        Start::Prepared {
+            single,
+            active,
+            coherent,
+        } => (single, active, coherent),
+    };
     let mut best: [Option<Hit>; K] = [None; K];
-    let active = active_of(&single);
-    if active != 0 && !bvh.nodes.is_empty() {
-        let coherent = coherent(bvh, &single, active);
-        if !coherent && active.count_ones() < switch {
-            // Hybrid at the root: single rays, without building the packet.
-            let mut m = active;
-            while m != 0 {
-                let i = m.trailing_zeros() as usize;
-                m &= m - 1;
-                best[i] = intersect_from::<T, L, N>(bvh, 0, &mut single[i]);
-            }
+    if !coherent && active.count_ones() < switch {
+        // Hybrid at the root: single rays, without building the packet.
+        let mut m = active;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            best[i] = intersect_from::<T, L, N>(bvh, 0, &mut single[i]);
+        }
+    } else {
+        let neg = sign_lanes::<R, K>(&single);
+        if coherent {
+            walk_interval::<T, L, N, R, K, false>(bvh, &neg, &mut single, &mut best, active);
         } else {
-            let neg = sign_lanes::<R, K>(&single);
-            if coherent {
-                walk_interval::<T, L, N, R, K, false>(bvh, &neg, &mut single, &mut best, active);
-            } else {
-                let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
-                let mut lanes = Leaves::<R, K>::new(&single);
-                let mut w = Walk {
-                    packet: &mut packet,
-                    neg: &neg,
-                    single: &mut single,
-                    lanes: &mut lanes,
-                    best: &mut best,
-                };
-                w.run::<T, L, N, false>(bvh, active, switch);
-            }
+            let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
+            let mut lanes = Leaves::<R, K>::new(&single);
+            let mut w = Walk {
+                packet: &mut packet,
+                neg: &neg,
+                single: &mut single,
+                lanes: &mut lanes,
+                best: &mut best,
+            };
+            w.run::<T, L, N, false>(bvh, active, switch);
         }
     }
     for (h, b) in hits[..n].iter_mut().zip(best) {
@@ -362,47 +402,49 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
     switch: u32,
 ) {
     let n = rays.len().min(occluded.len()).min(K);
-    if to_singles(&rays[..n], switch) {
-        for (o, r) in occluded[..n].iter_mut().zip(rays) {
-            *o = crate::traverse::wide::occluded::<T, L, N>(bvh, r);
+    let (mut single, active, coherent) = match start::<L, N, R, K>(bvh, &rays[..n], switch) {
+        Start::Singles => {
+            for (o, r) in occluded[..n].iter_mut().zip(rays) {
+                *o = crate::traverse::wide::occluded::<T, L, N>(bvh, r);
+            }
+            return;
         }
-        return;
-    }
-    if root_lanes::<L, N, R, K>(bvh, &rays[..n]) == 0 {
-        occluded[..n].fill(false);
-        return;
-    }
-    let mut single = prepare::<K>(&rays[..n]);
-    let active = active_of(&single);
+        Start::Miss => {
+            occluded[..n].fill(false);
+            return;
+        }
+        Start::Prepared {
+            single,
+            active,
+            coherent,
+        } => (single, active, coherent),
+    };
     let mut mask = 0u32;
-    if active != 0 && !bvh.nodes.is_empty() {
-        let coherent = coherent(bvh, &single, active);
-        if !coherent && active.count_ones() < switch {
-            let mut m = active;
-            while m != 0 {
-                let i = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if occluded_from::<T, L, N>(bvh, 0, &single[i]) {
-                    mask |= 1 << i;
-                }
+    if !coherent && active.count_ones() < switch {
+        let mut m = active;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if occluded_from::<T, L, N>(bvh, 0, &single[i]) {
+                mask |= 1 << i;
             }
+        }
+    } else {
+        let mut best = [None; K];
+        let neg = sign_lanes::<R, K>(&single);
+        if coherent {
+            mask = walk_interval::<T, L, N, R, K, true>(bvh, &neg, &mut single, &mut best, active);
         } else {
-            let mut best = [None; K];
-            let neg = sign_lanes::<R, K>(&single);
-            if coherent {
-                mask = walk_interval::<T, L, N, R, K, true>(bvh, &neg, &mut single, &mut best, active);
-            } else {
-                let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
-                let mut lanes = Leaves::<R, K>::new(&single);
-                let mut w = Walk {
-                    packet: &mut packet,
-                    neg: &neg,
-                    single: &mut single,
-                    lanes: &mut lanes,
-                    best: &mut best,
-                };
-                mask = w.run::<T, L, N, true>(bvh, active, switch);
-            }
+            let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
+            let mut lanes = Leaves::<R, K>::new(&single);
+            let mut w = Walk {
+                packet: &mut packet,
+                neg: &neg,
+                single: &mut single,
+                lanes: &mut lanes,
+                best: &mut best,
+            };
+            mask = w.run::<T, L, N, true>(bvh, active, switch);
         }
     }
     for (i, o) in occluded[..n].iter_mut().enumerate() {
