@@ -55,9 +55,23 @@ pub trait Lane:
     fn abs(self) -> Self;
     /// A lane mask from bits: all bits set in lane `i` where bit `i` of `bits` is set, zero
     /// elsewhere (the inverse of [`bitmask`](Self::bitmask) on masks).
+    ///
+    /// ```
+    /// use strahl::math::{Lane, f32x8};
+    /// let m = f32x8::from_bitmask(0b1010_0110);
+    /// assert_eq!(m.bitmask(), 0b1010_0110);
+    /// let picked = m.select(f32x8::splat(1.0), f32x8::splat(0.0));
+    /// assert_eq!(picked.to_array(), [0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0, 1.0]);
+    /// ```
     fn from_bitmask(bits: u32) -> Self;
     /// The smallest lane, folded pairwise with [`min_l`](Self::min_l)'s rule (for NaN-free
     /// lanes: the minimum; which of `-0.0` and `0.0` it returns is unspecified).
+    ///
+    /// ```
+    /// use strahl::math::{Lane, f32x8};
+    /// let v = f32x8::new([3.0, 9.0, -2.5, 7.0, f32::INFINITY, 0.5, -2.0, 4.0]);
+    /// assert_eq!(v.min_lane(), -2.5);
+    /// ```
     fn min_lane(self) -> f32;
 }
 

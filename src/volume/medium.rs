@@ -94,7 +94,9 @@ pub trait Medium {
     fn lookup(&self, g: Vec3) -> Lookup;
 
     /// A hint: asks the cache for what [`lookup_x8`](Self::lookup_x8) at `g` will read, a few
-    /// steps before it does. Changes no result; the default does nothing.
+    /// steps before it does. Changes no result; the default does nothing. [`integrate_x8`](super::integrate_x8)
+    /// calls it every second step for the positions six steps ahead; a medium over memory the
+    /// caches do not hold (a large volume) implements it, as [`VolumeMedium`] does.
     #[inline(always)]
     fn prefetch_x8(&self, g: &[f32x8; 3]) {
         let _ = g;
