@@ -53,6 +53,8 @@ pub trait Lane:
     fn xor_sign(self, sign: Self) -> Self;
     /// Clears the sign bits.
     fn abs(self) -> Self;
+    /// Lane `i` (`i < N`; taken modulo `N`) read in place, without moving the vector.
+    fn at(&self, i: usize) -> f32;
     /// A lane mask from bits: all bits set in lane `i` where bit `i` of `bits` is set, zero
     /// elsewhere (the inverse of [`bitmask`](Self::bitmask) on masks).
     ///
@@ -159,6 +161,10 @@ macro_rules! impl_lane {
             #[inline(always)]
             fn abs(self) -> Self {
                 <$t>::abs(self)
+            }
+            #[inline(always)]
+            fn at(&self, i: usize) -> f32 {
+                bytemuck::cast_ref::<$t, [f32; $n]>(self)[i % $n]
             }
             #[inline(always)]
             fn from_bitmask(bits: u32) -> Self {

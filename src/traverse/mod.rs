@@ -95,6 +95,20 @@ pub trait TriangleTest {
         prim: u32,
         hits: &mut HitLanes<L, N>,
     ) -> u32;
+    /// For coherent packets' leaves: [`moller::closest_packet_leaf`]'s answer, where the test
+    /// has such a kernel (`None`: test each ray on its own).
+    #[doc(hidden)]
+    #[inline(always)]
+    fn closest_packet_leaf<R: Lane, L: Lane, const N: usize>(
+        origin: [R; 3],
+        direction: [R; 3],
+        tmin: R,
+        tmax: R,
+        packs: &[TriangleLanes<L, N>],
+    ) -> Option<(u32, R, R, R, R)> {
+        let _ = (origin, direction, tmin, tmax, packs);
+        None
+    }
 }
 
 /// Möller-Trumbore ([`moller::intersect_scalar`]): fast, not watertight.
@@ -127,6 +141,16 @@ impl TriangleTest for Moller {
         hits: &mut HitLanes<L, N>,
     ) -> u32 {
         moller::intersect_packet(rays, tri, prim, hits)
+    }
+    #[inline(always)]
+    fn closest_packet_leaf<R: Lane, L: Lane, const N: usize>(
+        origin: [R; 3],
+        direction: [R; 3],
+        tmin: R,
+        tmax: R,
+        packs: &[TriangleLanes<L, N>],
+    ) -> Option<(u32, R, R, R, R)> {
+        Some(moller::closest_packet_leaf(origin, direction, tmin, tmax, packs))
     }
 }
 
