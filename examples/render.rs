@@ -109,6 +109,8 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
         Assignment::Dynamic,
         |t: Tile, out: &mut [Option<Hit>]| {
             let tw = t.x1 - t.x0;
+            // Once per tile: every packet overwrites the entries it uses.
+            let mut block = [None; 8];
             for by in (t.y0..t.y1).step_by(2) {
                 for bx in (t.x0..t.x1).step_by(4) {
                     let mut rays = [Ray::new(Vec3::ZERO, Vec3::ZERO); 8];
@@ -121,7 +123,6 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
                             n += 1;
                         }
                     }
-                    let mut block = [None; 8];
                     packet::intersect8::<Watertight, _, 8>(bvh.view(), &rays[..n], &mut block, packet::DEFAULT_SWITCH);
                     for (i, &j) in at[..n].iter().enumerate() {
                         out[j] = block[i];

@@ -357,7 +357,9 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
             return;
         }
         Start::Miss => {
-            hits[..n].fill(None);
+            // PERF: a copy, not `fill(None)`: LLVM turned the fill (one tag every 20 bytes)
+            // into an AVX-512 scatter, 7% of the time of packets that miss (AMD EPYC).
+            hits[..n].copy_from_slice(&[None; K][..n]);
             return;
         }
         Start::Prepared {
@@ -392,9 +394,7 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
             w.run::<T, L, N, false>(bvh, active, switch);
         }
     }
-    for (h, b) in hits[..n].iter_mut().zip(best) {
-        *h = b;
-    }
+    hits[..n].copy_from_slice(&best[..n]);
 }
 
 /// Any-hit answers of up to `K` rays (see [`occluded_packet`](super::occluded_packet)).
