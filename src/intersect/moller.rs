@@ -102,14 +102,13 @@ pub(crate) fn closest_packet_leaf<R: Lane, L: Lane, const N: usize>(
             valid &= valid - 1;
             let v: [[R; 3]; 3] = core::array::from_fn(|j| core::array::from_fn(|a| R::splat(pack.v[j][a].at(i))));
             let (hit, t, u, vv) = core(origin, direction, &v, tmin, tmax);
-            let m = hit.bitmask();
-            if m != 0 {
-                tmax = hit.select(t, tmax);
-                bu = hit.select(u, bu);
-                bv = hit.select(vv, bv);
-                bp = hit.select(R::splat(f32::from_bits(pack.prim[i % N])), bp);
-                hits |= m;
-            }
+            // PERF: no branch on the hit mask (which of a leaf's triangles a packet hits is
+            // unpredictable): bunny 1024 x 1024, packets that reach a triangle 13.1 -> 12.8 ms.
+            tmax = hit.select(t, tmax);
+            bu = hit.select(u, bu);
+            bv = hit.select(vv, bv);
+            bp = hit.select(R::splat(f32::from_bits(pack.prim[i % N])), bp);
+            hits |= hit.bitmask();
         }
     }
     (hits, tmax, bu, bv, bp)
