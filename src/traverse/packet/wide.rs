@@ -302,25 +302,25 @@ fn active_of<const K: usize>(single: &[PreparedRay; K]) -> u32 {
 }
 
 /// How a packet starts, decided once for [`intersect`] and [`occluded`].
-enum Start<const K: usize> {
+enum Start {
     /// The hybrid's answer at the root, without the packet's setup: every ray as a single ray.
     Singles,
     /// No lane enters the scene (or none has a ray): every answer is a miss.
     Miss,
-    /// The prepared lanes, those with a ray (`active`), and whether they are [`coherent`].
-    Prepared {
-        single: [PreparedRay; K],
-        active: u32,
-        coherent: bool,
-    },
+    /// The lanes were prepared (into the caller's array): those with a ray (`active`), and
+    /// whether they are [`coherent`].
+    Prepared { active: u32, coherent: bool },
 }
 
+/// PERF: the prepared lanes go to the caller's array, not out in the enum: returning them by
+/// value cost a 704-byte `memcpy` per packet.
 #[inline(always)]
 fn start<L: Lane, const N: usize, R: Lane, const K: usize>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[Ray],
     switch: u32,
-) -> Start<K> {
+    single: &mut [PreparedRay; K],
+) -> Start {
     if to_singles(rays, switch) {
         return Start::Singles;
     }
@@ -328,16 +328,25 @@ fn start<L: Lane, const N: usize, R: Lane, const K: usize>(
     if root_lanes::<L, N, R, K>(bvh, rays) == 0 {
         return Start::Miss;
     }
-    let single = prepare::<K>(rays);
-    let active = active_of(&single);
+    for (s, r) in single.iter_mut().zip(rays) {
+        *s = PreparedRay::new(r);
+    }
+    let active = active_of(single);
     if active == 0 {
         return Start::Miss;
     }
-    let coherent = coherent(bvh, &single, active);
-    Start::Prepared {
-        single,
-        active,
-        coherent,
+    let coherent = coherent(bvh, single, active);
+    Start::Prepared { active, coherent }
+}
+
+/// `dst = src[..dst.len()]`, with a fixed-size copy for a full packet (the common case) instead
+/// of a `memcpy` call.
+#[inline(always)]
+fn copy_out<T: Copy, const K: usize>(dst: &mut [T], src: &[T; K]) {
+    if let Ok(d) = <&mut [T; K]>::try_from(&mut *dst) {
+        *d = *src;
+    } else {
+        dst.copy_from_slice(&src[..dst.len()]);
     }
 }
 
@@ -349,7 +358,8 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     switch: u32,
 ) {
     let n = rays.len().min(hits.len()).min(K);
-    let (mut single, active, coherent) = match start::<L, N, R, K>(bvh, &rays[..n], switch) {
+    let mut single = [PreparedRay::EMPTY; K];
+    let (active, coherent) = match start::<L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (h, r) in hits[..n].iter_mut().zip(rays) {
                 *h = crate::traverse::wide::intersect::<T, L, N>(bvh, r);
@@ -359,14 +369,10 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
         Start::Miss => {
             // PERF: a copy, not `fill(None)`: LLVM turned the fill (one tag every 20 bytes)
             // into an AVX-512 scatter, 7% of the time of packets that miss (AMD EPYC).
-            hits[..n].copy_from_slice(&[None; K][..n]);
+            copy_out(&mut hits[..n], &[None; K]);
             return;
         }
-        Start::Prepared {
-            single,
-            active,
-            coherent,
-        } => (single, active, coherent),
+        Start::Prepared { active, coherent } => (active, coherent),
     };
     let mut best: [Option<Hit>; K] = [None; K];
     if !coherent && active.count_ones() < switch {
@@ -394,7 +400,7 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
             w.run::<T, L, N, false>(bvh, active, switch);
         }
     }
-    hits[..n].copy_from_slice(&best[..n]);
+    copy_out(&mut hits[..n], &best);
 }
 
 /// Any-hit answers of up to `K` rays (see [`occluded_packet`](super::occluded_packet)).
@@ -405,7 +411,8 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
     switch: u32,
 ) {
     let n = rays.len().min(occluded.len()).min(K);
-    let (mut single, active, coherent) = match start::<L, N, R, K>(bvh, &rays[..n], switch) {
+    let mut single = [PreparedRay::EMPTY; K];
+    let (active, coherent) = match start::<L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (o, r) in occluded[..n].iter_mut().zip(rays) {
                 *o = crate::traverse::wide::occluded::<T, L, N>(bvh, r);
@@ -416,11 +423,7 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
             occluded[..n].fill(false);
             return;
         }
-        Start::Prepared {
-            single,
-            active,
-            coherent,
-        } => (single, active, coherent),
+        Start::Prepared { active, coherent } => (active, coherent),
     };
     let mut mask = 0u32;
     if !coherent && active.count_ones() < switch {
