@@ -90,6 +90,16 @@ impl PreparedRay {
     /// Prepares `ray`. An invalid ray becomes one that hits nothing.
     #[inline]
     pub fn new(ray: &Ray) -> Self {
+        Self::new_for(ray, true)
+    }
+
+    /// [`new`](Self::new), with the watertight test's fields ([`k`](Self::k),
+    /// [`shear`](Self::shear)) left at [`EMPTY`](Self::EMPTY)'s unless `watertight`: for the
+    /// traversals, which know their test at compile time ([`TriangleTest::WATERTIGHT`](crate::traverse::TriangleTest::WATERTIGHT)).
+    /// Every other field is the same.
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn new_for(ray: &Ray, watertight: bool) -> Self {
         // NOTE: subnormal direction components are flushed to a zero of the same sign: their
         // reciprocal overflows to infinity, so the slab test would treat the ray as parallel to
         // that slab while the triangle tests still moved along it, and a BVH could cull a hit
@@ -109,6 +119,20 @@ impl PreparedRay {
         {
             return Self::EMPTY;
         }
+        let inv = Vec3A::ONE / d;
+        let neg = d.is_negative_bitmask();
+        if !watertight {
+            return Self {
+                origin: ray.origin,
+                direction: d.into(),
+                inv_dir: inv.into(),
+                tmin: ray.tmin,
+                tmax: ray.tmax,
+                neg: [neg & 1 != 0, neg & 2 != 0, neg & 4 != 0],
+                k: Self::EMPTY.k,
+                shear: Self::EMPTY.shear,
+            };
+        }
         // Dominant axis of the direction; ties go to the lower axis.
         let a = d.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
@@ -122,9 +146,7 @@ impl PreparedRay {
         let dz = d[kz];
         // Swap to preserve the triangles' winding when looking down a negative axis.
         let (kx, ky) = if dz < 0.0 { (ky, kx) } else { (kx, ky) };
-        let inv = Vec3A::ONE / d;
         let shear = Vec3A::new(d[kx], d[ky], 1.0) / Vec3A::splat(dz);
-        let neg = d.is_negative_bitmask();
         Self {
             origin: ray.origin,
             direction: d.into(),
@@ -265,7 +287,20 @@ mod tests {
                 tmin: if i % 7 == 0 { pick() } else { 0.0 },
                 tmax: if i % 5 == 0 { pick() } else { f32::INFINITY },
             };
-            assert_eq!(bits(&PreparedRay::new(&ray)), bits(&prepare_reference(&ray)), "{ray:?}");
+            let full = PreparedRay::new(&ray);
+            assert_eq!(bits(&full), bits(&prepare_reference(&ray)), "{ray:?}");
+            // Without the watertight fields: every other field the same, those at EMPTY's.
+            let lean = PreparedRay::new_for(&ray, false);
+            let watertight = |r: &PreparedRay| PreparedRay {
+                k: full.k,
+                shear: full.shear,
+                ..*r
+            };
+            assert_eq!(bits(&watertight(&lean)), bits(&full), "{ray:?}");
+            assert_eq!(
+                (lean.k, bits(&lean).0[3]),
+                (PreparedRay::EMPTY.k, bits(&PreparedRay::EMPTY).0[3])
+            );
         }
     }
 

@@ -49,7 +49,7 @@ pub fn occluded_scalar<T: TriangleTest, P: Triangles + ?Sized>(bvh: Bvh2Ref<'_>,
 #[inline(always)]
 fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_>, tris: &P, ray: &Ray) -> Option<Hit> {
     let nodes = bvh.nodes;
-    let mut r = PreparedRay::new(ray);
+    let mut r = PreparedRay::new_for(ray, T::WATERTIGHT);
     let root = nodes.first()?;
     intersect_aabb_scalar(&r, &root.aabb())?;
 

@@ -81,6 +81,9 @@ pub const MAX_DEPTH: u32 = STACK_SIZE as u32;
 pub trait TriangleTest {
     /// A short name for reports and bench labels.
     const NAME: &'static str;
+    /// `true` if the test reads [`PreparedRay::k`] and [`PreparedRay::shear`]; the traversals
+    /// skip computing them otherwise ([`PreparedRay::new_for`]). Defaults to `true`.
+    const WATERTIGHT: bool = true;
     /// The hit of `ray` with `tri` (reported with `prim`), if any, within `[tmin, tmax)`.
     fn intersect(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<Hit>;
     /// The closest hit among `N` SoA triangles (ties: lowest lane), for wide-BVH leaves.
@@ -121,6 +124,7 @@ pub struct Watertight;
 
 impl TriangleTest for Moller {
     const NAME: &'static str = "moller";
+    const WATERTIGHT: bool = false;
     #[inline(always)]
     fn intersect(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<Hit> {
         moller::intersect_scalar(ray, tri, prim)

@@ -70,7 +70,7 @@ pub(crate) fn prefetch<L, const N: usize>(bvh: BvhWideRef<'_, L, N>, code: u32) 
 /// ```
 #[inline]
 pub fn intersect<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, ray: &Ray) -> Option<Hit> {
-    let mut r = PreparedRay::new(ray);
+    let mut r = PreparedRay::new_for(ray, T::WATERTIGHT);
     if r.is_empty() || bvh.nodes.is_empty() {
         return None;
     }
@@ -149,7 +149,7 @@ pub fn intersect_from<T: TriangleTest, L: Lane, const N: usize>(
 /// first hit found.
 #[inline]
 pub fn occluded<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, ray: &Ray) -> bool {
-    let r = PreparedRay::new(ray);
+    let r = PreparedRay::new_for(ray, T::WATERTIGHT);
     occluded_prepared::<T, L, N>(bvh, &r)
 }
 

@@ -315,7 +315,7 @@ enum Start {
 /// PERF: the prepared lanes go to the caller's array, not out in the enum: returning them by
 /// value cost a 704-byte `memcpy` per packet.
 #[inline(always)]
-fn start<L: Lane, const N: usize, R: Lane, const K: usize>(
+fn start<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[Ray],
     switch: u32,
@@ -329,7 +329,7 @@ fn start<L: Lane, const N: usize, R: Lane, const K: usize>(
         return Start::Miss;
     }
     for (s, r) in single.iter_mut().zip(rays) {
-        *s = PreparedRay::new(r);
+        *s = PreparedRay::new_for(r, T::WATERTIGHT);
     }
     let active = active_of(single);
     if active == 0 {
@@ -359,7 +359,7 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
 ) {
     let n = rays.len().min(hits.len()).min(K);
     let mut single = [PreparedRay::EMPTY; K];
-    let (active, coherent) = match start::<L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
+    let (active, coherent) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (h, r) in hits[..n].iter_mut().zip(rays) {
                 *h = crate::traverse::wide::intersect::<T, L, N>(bvh, r);
@@ -412,7 +412,7 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
 ) {
     let n = rays.len().min(occluded.len()).min(K);
     let mut single = [PreparedRay::EMPTY; K];
-    let (active, coherent) = match start::<L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
+    let (active, coherent) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (o, r) in occluded[..n].iter_mut().zip(rays) {
                 *o = crate::traverse::wide::occluded::<T, L, N>(bvh, r);
