@@ -107,6 +107,8 @@ pub(crate) fn closest_packet_leaf<R: Lane, L: Lane, const N: usize>(
             tmax = hit.select(t, tmax);
             bu = hit.select(u, bu);
             bv = hit.select(vv, bv);
+            // The primitive index rides in the lanes as float bits: `select` is a bitwise
+            // blend on every target (no float operation touches it).
             bp = hit.select(R::splat(f32::from_bits(pack.prim[i % N])), bp);
             hits |= hit.bitmask();
         }

@@ -572,7 +572,9 @@ impl<'a, V: Voxel> Volume<'a, V> {
         for a in 0..3 {
             let gc = g[a].max_l(f32x8::splat(0.0)).min_l(f32x8::splat(self.gmax[a]));
             // gc >= 0 and not NaN, so truncation is the floor, as `as i32` in the scalar form.
-            let i = gc.fast_trunc_int().min(i32x8::splat(self.cmax[a]));
+            // NOTE: the saturating form: on an axis of 2^31 - 63 voxels or more `gmax` rounds up to
+            // 2^31, where the untrapped conversion gives `i32::MIN` (found in review).
+            let i = gc.trunc_int().min(i32x8::splat(self.cmax[a]));
             frac[a] = gc - i.round_float();
             base += i * i32x8::splat(self.stride[a]);
             idx[a] = i.to_array();

@@ -743,8 +743,11 @@ fn product_bounds<L: Lane>(a0: L, a1: L, b0: f32, b1: f32) -> (L, L) {
 }
 
 /// Coherent packets: children are culled against the packet's interval (Wald, Boulos and Shirley
-/// 2007), leaf children against each lane's slab test, and the lanes that enter a leaf run the
-/// single-ray x`N` kernel on its packs (exact per lane, so the answers equal single rays). Returns the occluded lanes (`ANY`) or 0.
+/// 2007), leaf children against each lane's slab test, and the lanes that enter a leaf test its
+/// packs: for closest hits, where at least half the lanes enter and the packet is at least as wide
+/// as the packs, each triangle against the whole packet ([`TriangleTest::closest_packet_leaf`]),
+/// else each lane with the single-ray x`N` kernel; exact per lane either way, so the answers equal
+/// single rays. Returns the occluded lanes (`ANY`) or 0.
 fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool>(
     bvh: BvhWideRef<'_, L, N>,
     neg_lanes: &[R; 3],
@@ -844,9 +847,10 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
             let (first, count) = leaf_packs(cur);
             if let Some(packs) = bvh.packs.get(first..first + count) {
                 let m = cur_mask & active;
-                // PERF: each lane runs the single-ray kernel on every pack (one x`N` test per ray
-                // and pack), not one packet kernel per triangle: measured 1.1-2x faster on primary
-                // rays (packets of 4-16, bunny and sphereflake), even where every lane enters.
+                // PERF: any hit, and closest hits with few lanes or narrow packets, run the
+                // single-ray kernel per lane on every pack (one x`N` test per ray and pack). An
+                // earlier packet kernel per triangle (AoS triangles, per-bit commits) measured
+                // 1.1-2x slower; the SoA one below wins where the packet fills its lanes.
                 let hit_any = if ANY {
                     any_rays::<T, L, N, K>(packs, single, m)
                 } else {
