@@ -121,6 +121,9 @@ impl PreparedRay {
         }
         let inv = Vec3A::ONE / d;
         let neg = d.is_negative_bitmask();
+        // PERF: a return of its own, not one struct literal with `(k, shear)` chosen by an `if`:
+        // that form made 8-ray packets 7% slower (bunny, 1024 x 1024, best of 120; the K-lane
+        // preparation loop compiled worse), single rays the same.
         if !watertight {
             return Self {
                 origin: ray.origin,

@@ -4,9 +4,9 @@
 
 use super::leaf::Leaves;
 use super::stack::{Entry, MaskStack};
-use super::wide::{box_lanes, hit_min, lane_mask, open_lanes, prepare, sign_lanes};
+use super::wide::{box_lanes, hit_min, lane_mask, open_lanes, prepare_into, sign_lanes};
 use crate::geometry::{Hit, Ray, Triangles};
-use crate::intersect::PreparedPacket;
+use crate::intersect::{PreparedPacket, PreparedRay};
 use crate::math::Lane;
 use crate::traverse::{Bvh2Ref, STACK_SIZE, TriangleTest, intersect_scalar, occluded_scalar};
 
@@ -19,7 +19,8 @@ pub(super) fn run<T: TriangleTest, P: Triangles + ?Sized, R: Lane, const K: usiz
     best: &mut [Option<Hit>; K],
 ) -> u32 {
     let n = rays.len().min(K);
-    let single = prepare::<K>(&rays[..n]);
+    let mut single = [PreparedRay::EMPTY; K];
+    prepare_into(&rays[..n], &mut single, true);
     let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
     let mut active = packet.active();
     let nodes = bvh.nodes;

@@ -282,14 +282,13 @@ fn to_singles(rays: &[Ray], switch: u32) -> bool {
     (rays.len() as u32) < switch && rays.iter().any(|r| signs(r) != first)
 }
 
-/// Prepares up to `K` rays; lanes past `rays` are [`PreparedRay::EMPTY`].
+/// Prepares up to `K` rays into `single` (its lanes past `rays` are left as they are), with the
+/// watertight fields where `watertight` ([`PreparedRay::new_for`]).
 #[inline(always)]
-pub(super) fn prepare<const K: usize>(rays: &[Ray]) -> [PreparedRay; K] {
-    let mut single = [PreparedRay::EMPTY; K];
+pub(super) fn prepare_into<const K: usize>(rays: &[Ray], single: &mut [PreparedRay; K], watertight: bool) {
     for (s, r) in single.iter_mut().zip(rays) {
-        *s = PreparedRay::new(r);
+        *s = PreparedRay::new_for(r, watertight);
     }
-    single
 }
 
 /// The lanes whose interval `[tmin, tmax)` is not empty.
@@ -328,9 +327,7 @@ fn start<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
     if root_lanes::<L, N, R, K>(bvh, rays) == 0 {
         return Start::Miss;
     }
-    for (s, r) in single.iter_mut().zip(rays) {
-        *s = PreparedRay::new_for(r, T::WATERTIGHT);
-    }
+    prepare_into(rays, single, T::WATERTIGHT);
     let active = active_of(single);
     if active == 0 {
         return Start::Miss;
