@@ -101,3 +101,86 @@ fn speed_on(big: bool) {
         );
     }
 }
+
+/// 8-ray packets against Embree's `rtcIntersect8` (coherent flag) on the bunny's primary rays in
+/// 4 x 2 tiles, split into the packets where some ray hits and those where none does, taking
+/// turns, best of `STRAHL_REPS` (default 60) rounds.
+///
+/// `cargo test --release --features embree --test packet_speed -- --ignored --nocapture versus_embree`
+/// (`STRAHL_RES=512` for the 512 x 512 camera; default 1024).
+#[cfg(feature = "embree")]
+#[test]
+#[ignore]
+fn versus_embree() {
+    #[path = "../benches/peers/mod.rs"]
+    mod peers;
+    let tris = strahl::scene::bunny().to_soup();
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    let b = common::bounds(&tris);
+    let res: u32 = std::env::var("STRAHL_RES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1024);
+    let reps: usize = std::env::var("STRAHL_REPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(60);
+    let all = common::primary_rays(&b, res, res, TileShape::for_rays(8));
+    let device = peers::embree::Device::single_threaded();
+    let scene = peers::embree::Scene::new(&device, &tris, peers::embree::Quality::Medium);
+    let single: Vec<_> = all.iter().map(|r| b8.intersect::<Moller>(r)).collect();
+    let (mut hit, mut miss) = (Vec::new(), Vec::new());
+    for (c, h) in all.chunks(8).zip(single.chunks(8)) {
+        if h.iter().any(Option::is_some) {
+            &mut hit
+        } else {
+            &mut miss
+        }
+        .extend_from_slice(c);
+    }
+    let ours = |rays: &[strahl::Ray]| {
+        let mut hits = [None; 8];
+        let mut n = 0;
+        for r in rays.chunks(8) {
+            packet::intersect8::<Moller, _, 8>(b8.view(), r, &mut hits, 0);
+            n += hits[..r.len()].iter().filter(|h| h.is_some()).count();
+        }
+        n
+    };
+    let embree = |rays: &[strahl::Ray]| {
+        rays.chunks(8)
+            .map(|r| scene.intersect8(r)[..r.len()].iter().filter(|h| h.is_some()).count())
+            .sum::<usize>()
+    };
+    let bvh8 = |rays: &[strahl::Ray]| rays.iter().filter(|r| b8.intersect::<Moller>(r).is_some()).count();
+    let only = std::env::var("STRAHL_ONLY").unwrap_or_default();
+    for (name, rays) in [("all", &all), ("hit", &hit), ("miss", &miss)] {
+        if only == "ours_hit" {
+            // For a profiler: only strahl's packets, only the packets with a hit.
+            if name == "hit" {
+                for _ in 0..reps {
+                    black_box(ours(black_box(rays)));
+                }
+            }
+            continue;
+        }
+        let n = ours(rays);
+        assert!(n.abs_diff(embree(rays)) <= rays.len() / 1000 + 1);
+        assert_eq!(n, bvh8(rays));
+        let mut t = [f64::INFINITY; 3];
+        for _ in 0..reps {
+            t[0] = t[0].min(min_ms(1, || _ = black_box(ours(black_box(rays)))));
+            t[1] = t[1].min(min_ms(1, || _ = black_box(embree(black_box(rays)))));
+            t[2] = t[2].min(min_ms(1, || _ = black_box(bvh8(black_box(rays)))));
+        }
+        println!(
+            "bunny {res}x{res} {name} ({} packets): packet8 {:.2} ms, Embree rtcIntersect8 {:.2} ms, single BVH8 {:.2} ms: packet8 / Embree {:.2}x",
+            rays.len() / 8,
+            t[0],
+            t[1],
+            t[2],
+            t[1] / t[0]
+        );
+    }
+}

@@ -174,15 +174,6 @@ impl PreparedRay {
         shear: Vec3::new(0.0, 0.0, 1.0),
     };
 
-    /// The sign bits of `inv_dir` (= `neg`) as bits 0..3, read as floats.
-    ///
-    /// PERF: reading `neg` right after `new` stored its three bytes one by one made the compiler
-    /// load them as one word: a failed store-to-load forwarding on every ray.
-    #[inline(always)]
-    pub(crate) fn sign_bits(&self) -> u32 {
-        Vec3A::from(self.inv_dir).is_negative_bitmask()
-    }
-
     /// `true` if the interval `[tmin, tmax)` is empty (or NaN): no kernel reports a hit.
     #[inline]
     pub fn is_empty(&self) -> bool {

@@ -75,10 +75,32 @@ pub trait Lane:
     /// assert_eq!(v.min_lane(), -2.5);
     /// ```
     fn min_lane(self) -> f32;
+    /// The largest lane, folded pairwise with [`max_l`](Self::max_l)'s rule (for NaN-free
+    /// lanes: the maximum; which of `-0.0` and `0.0` it returns is unspecified).
+    ///
+    /// ```
+    /// use strahl::math::{Lane, f32x4};
+    /// assert_eq!(f32x4::new([3.0, 9.0, -2.5, 7.0]).max_lane(), 9.0);
+    /// ```
+    fn max_lane(self) -> f32;
+    /// The transpose of `N` rows of eight values: element `j` of the result holds `rows[i][j]` in
+    /// lane `i` (`rows.len() >= N`; rows past `N` are ignored). Eight-value rows are what a
+    /// [`Ray`](crate::Ray) is (`origin`, `tmin`, `direction`, `tmax`), so this turns `N` rays into
+    /// the lanes of a packet in registers: shuffles where the width has them, not `8 N` scalar
+    /// stores read back as vectors (which stalls on store-to-load forwarding).
+    ///
+    /// ```
+    /// use strahl::math::{Lane, f32x4};
+    /// let rows: [[f32; 8]; 4] = core::array::from_fn(|i| core::array::from_fn(|j| (10 * i + j) as f32));
+    /// let t = f32x4::transpose8(&rows);
+    /// assert_eq!(t[3].to_array(), [3.0, 13.0, 23.0, 33.0]);
+    /// assert_eq!(t[7].to_array(), [7.0, 17.0, 27.0, 37.0]);
+    /// ```
+    fn transpose8(rows: &[[f32; 8]]) -> [Self; 8];
 }
 
 macro_rules! impl_lane {
-    ($t:ty, $i:ty, $n:expr) => {
+    ($t:ty, $i:ty, $n:expr, |$rows:ident| $transpose:block) => {
         impl Lane for $t {
             const N: usize = $n;
             #[inline(always)]
@@ -185,13 +207,51 @@ macro_rules! impl_lane {
                 }
                 a[0]
             }
+            #[inline(always)]
+            fn max_lane(self) -> f32 {
+                let mut a = self.to_array();
+                let mut w = $n / 2;
+                while w > 0 {
+                    for i in 0..w {
+                        a[i] = crate::math::max_l(a[i], a[i + w]);
+                    }
+                    w /= 2;
+                }
+                a[0]
+            }
+            #[inline(always)]
+            fn transpose8($rows: &[[f32; 8]]) -> [Self; 8] {
+                $transpose
+            }
         }
     };
 }
 
-impl_lane!(f32x4, i32x4, 4);
-impl_lane!(f32x8, i32x8, 8);
-impl_lane!(f32x16, i32x16, 16);
+impl_lane!(f32x4, i32x4, 4, |rows| {
+    let rows = &rows[..4];
+    let half = |h: usize| {
+        f32x4::transpose(core::array::from_fn(|i| {
+            f32x4::new([
+                rows[i][4 * h],
+                rows[i][4 * h + 1],
+                rows[i][4 * h + 2],
+                rows[i][4 * h + 3],
+            ])
+        }))
+    };
+    let (lo, hi) = (half(0), half(1));
+    [lo[0], lo[1], lo[2], lo[3], hi[0], hi[1], hi[2], hi[3]]
+});
+impl_lane!(f32x8, i32x8, 8, |rows| {
+    let rows = &rows[..8];
+    f32x8::transpose(core::array::from_fn(|i| f32x8::new(rows[i])))
+});
+impl_lane!(f32x16, i32x16, 16, |rows| {
+    let rows = &rows[..16];
+    let half = |h: usize| f32x8::transpose(core::array::from_fn(|i| f32x8::new(rows[8 * h + i])));
+    let (lo, hi) = (half(0), half(1));
+    core::array::from_fn(|j| bytemuck::cast::<[f32x8; 2], f32x16>([lo[j], hi[j]]))
+});
 
 #[cfg(test)]
 mod tests {
@@ -238,8 +298,12 @@ mod tests {
             }
             v[lo] = -7.25;
             assert_eq!(L::load(&v).min_lane(), -7.25);
+            let mut w = v.map(|x| if x == f32::INFINITY { -9.0 } else { x });
+            w[lo] = 17.5;
+            assert_eq!(L::load(&w).max_lane(), 17.5);
         }
         assert_eq!(L::splat(f32::INFINITY).min_lane(), f32::INFINITY);
+        assert_eq!(L::splat(f32::NEG_INFINITY).max_lane(), f32::NEG_INFINITY);
     }
 
     #[test]
@@ -250,5 +314,22 @@ mod tests {
         check_masks_and_min::<f32x4>();
         check_masks_and_min::<f32x8>();
         check_masks_and_min::<f32x16>();
+    }
+
+    fn check_transpose<L: Lane>() {
+        let rows: [[f32; 8]; 16] = core::array::from_fn(|i| core::array::from_fn(|j| (100 * i + j) as f32 - 0.5));
+        let t = L::transpose8(&rows);
+        for (j, v) in t.iter().enumerate() {
+            for (i, row) in rows.iter().enumerate().take(L::N) {
+                assert_eq!(v.lane(i).to_bits(), row[j].to_bits());
+            }
+        }
+    }
+
+    #[test]
+    fn transpose8_is_the_transpose() {
+        check_transpose::<f32x4>();
+        check_transpose::<f32x8>();
+        check_transpose::<f32x16>();
     }
 }

@@ -83,38 +83,80 @@ fn box_slabs<R: Lane>(
     (near, hit.bitmask())
 }
 
-/// The lanes of the slab test for the interval walk: origins, reciprocal directions, `tmin` and
-/// `tmax` of the `K` rays, transposed without the triangle kernels' fields of a
-/// [`PreparedPacket`] (PERF: building a whole one cost 15% of a coherent packet's walk).
-struct Slabs<R> {
+/// A packet's rays as lanes, for the interval walk: origins, flushed directions, reciprocals,
+/// `[tmin, tmax)` (invalid rays: `[inf, -inf)`) and the reciprocals' sign masks, bit for bit
+/// the fields of [`PreparedRay::new`] in every valid lane. Computed once from the rays by
+/// [`root_lanes`] (PERF: transposing them out of `K` prepared rays, with the interval, coherence
+/// and activity tests that read them lane by lane, was a fifth of a coherent packet's time).
+pub(super) struct Slabs<R> {
     origin: [R; 3],
     direction: [R; 3],
     inv_dir: [R; 3],
     tmin: R,
     tmax: R,
+    /// All bits set where `inv_dir` is negative (the near plane is the box's max).
+    neg: [R; 3],
 }
 
 impl<R: Lane> Slabs<R> {
+    /// The lanes whose interval `[tmin, tmax)` is not empty: those of the rays that
+    /// [`PreparedRay::new`] does not make [`is_empty`](PreparedRay::is_empty).
     #[inline(always)]
-    fn new<const K: usize>(single: &[PreparedRay; K]) -> Self {
-        let (mut o, mut d, mut inv) = ([[0f32; K]; 3], [[0f32; K]; 3], [[0f32; K]; 3]);
-        let (mut tmin, mut tmax) = ([0f32; K], [0f32; K]);
-        for (i, r) in single.iter().enumerate() {
-            for a in 0..3 {
-                o[a][i] = r.origin[a];
-                d[a][i] = r.direction[a];
-                inv[a][i] = r.inv_dir[a];
+    fn active(&self) -> u32 {
+        self.tmin.lt(self.tmax).bitmask()
+    }
+
+    /// `true` if the lanes of `active` are coherent enough for interval culling (see the
+    /// [module docs](super#wide-bvhs)): the same direction signs, directions within
+    /// [`COHERENT_MIN_COS`](super::COHERENT_MIN_COS) of the first lane's, and origins within
+    /// [`COHERENT_MAX_ORIGIN_SPREAD`](super::COHERENT_MAX_ORIGIN_SPREAD) of the tree's extent.
+    /// The interval walk is exact for any packet, but it visits the union of the lanes' paths:
+    /// for rays from scattered origins (diffuse bounces) that is most of the tree. Only speed
+    /// depends on the answer.
+    #[inline(always)]
+    fn coherent<L: Lane, const N: usize>(&self, bvh: BvhWideRef<'_, L, N>, active: u32) -> bool {
+        let first = active.trailing_zeros() as usize;
+        for n in &self.neg {
+            let m = n.bitmask() & active;
+            if m != 0 && m != active {
+                return false;
             }
-            (tmin[i], tmax[i]) = (r.tmin, r.tmax);
         }
-        let load3 = |v: &[[f32; K]; 3]| [R::load(&v[0]), R::load(&v[1]), R::load(&v[2])];
-        Self {
-            origin: load3(&o),
-            direction: load3(&d),
-            inv_dir: load3(&inv),
-            tmin: R::load(&tmin),
-            tmax: R::load(&tmax),
+        let d = &self.direction;
+        let d0 = [d[0].at(first), d[1].at(first), d[2].at(first)].map(R::splat);
+        let dot = d[0] * d0[0] + d[1] * d0[1] + d[2] * d0[2];
+        let (l0, l) = (
+            d0[0] * d0[0] + d0[1] * d0[1] + d0[2] * d0[2],
+            d[0] * d[0] + d[1] * d[1] + d[2] * d[2],
+        );
+        // `cos >= COHERENT_MIN_COS` without square roots: `d.d0 >= 0` and
+        // `(d.d0)^2 >= cos^2 |d|^2 |d0|^2`.
+        let cos2 = R::splat(super::COHERENT_MIN_COS * super::COHERENT_MIN_COS);
+        let close = dot.ge(R::splat(0.0)) & (dot * dot).ge(cos2 * (l0 * l));
+        if close.bitmask() & active != active {
+            return false;
         }
+        let on = R::from_bitmask(active);
+        let mut spread = 0f32;
+        for o in &self.origin {
+            let (lo, hi) = (
+                on.select(*o, R::splat(f32::INFINITY)),
+                on.select(*o, R::splat(f32::NEG_INFINITY)),
+            );
+            spread = spread.max(hi.max_lane() - lo.min_lane());
+        }
+        if spread == 0.0 {
+            return true; // one origin (a camera)
+        }
+        // The tree's extent: the root's child boxes (empty slots have empty boxes).
+        let Some(root) = bvh.nodes.first() else {
+            return false;
+        };
+        let mut extent = 0f32;
+        for a in 0..3 {
+            extent = extent.max(root.bounds.max[a].max_lane() - root.bounds.min[a].min_lane());
+        }
+        spread <= extent * super::COHERENT_MAX_ORIGIN_SPREAD
     }
 }
 
@@ -160,53 +202,19 @@ fn sync_tmax<R: Lane, const K: usize>(packet: &PreparedPacket<R, K>, single: &mu
     }
 }
 
-/// `true` if the active lanes are coherent enough for interval culling (see the
-/// [module docs](super#wide-bvhs)): the same direction signs, directions within
-/// [`COHERENT_MIN_COS`](super::COHERENT_MIN_COS) of the first lane's, and origins within
-/// [`COHERENT_MAX_ORIGIN_SPREAD`](super::COHERENT_MAX_ORIGIN_SPREAD) of the tree's extent. The
-/// interval walk is exact for any packet, but it visits the union of the lanes' paths: for rays
-/// from scattered origins (diffuse bounces) that is most of the tree.
+/// The rows of up to `K` rays (`origin`, `tmin`, `direction`, `tmax`) as lanes; lanes past
+/// `rays` get an invalid ray (NaN origin, direction 1, interval `[0, 0]`).
 #[inline(always)]
-pub(super) fn coherent<L: Lane, const N: usize, const K: usize>(
-    bvh: BvhWideRef<'_, L, N>,
-    single: &[PreparedRay; K],
-    active: u32,
-) -> bool {
-    let first = &single[active.trailing_zeros() as usize % K];
-    let signs = first.sign_bits();
-    let d0 = first.direction;
-    let (l0, cos2) = (d0.length_squared(), super::COHERENT_MIN_COS * super::COHERENT_MIN_COS);
-    let (mut lo, mut hi) = (first.origin, first.origin);
-    for (i, r) in single.iter().enumerate() {
-        if active >> i & 1 == 0 {
-            continue;
+fn ray_lanes<R: Lane, const K: usize>(rays: &[Ray]) -> [R; 8] {
+    if rays.len() >= K {
+        R::transpose8(bytemuck::cast_slice::<Ray, [f32; 8]>(&rays[..K]))
+    } else {
+        let mut rows = [[f32::NAN, f32::NAN, f32::NAN, 0.0, 1.0, 1.0, 1.0, 0.0]; K];
+        for (row, r) in rows.iter_mut().zip(rays) {
+            *row = bytemuck::cast(*r);
         }
-        // `cos >= COHERENT_MIN_COS` without square roots: `d.d0 >= 0` and `(d.d0)^2 >= cos^2 |d|^2 |d0|^2`.
-        let dot = r.direction.dot(d0);
-        if r.sign_bits() != signs || !(dot >= 0.0 && dot * dot >= cos2 * (l0 * r.direction.length_squared())) {
-            return false;
-        }
-        (lo, hi) = (lo.min(r.origin), hi.max(r.origin));
+        R::transpose8(&rows)
     }
-    if lo == hi {
-        return true; // one origin (a camera)
-    }
-    // The tree's extent: the root's child boxes (empty slots have empty boxes).
-    let Some(root) = bvh.nodes.first() else {
-        return false;
-    };
-    let mut extent = 0f32;
-    for a in 0..3 {
-        let (mut mn, mut mx) = ([0f32; N], [0f32; N]);
-        root.bounds.min[a].store(&mut mn);
-        root.bounds.max[a].store(&mut mx);
-        let (mn, mx) = (
-            mn.iter().fold(f32::INFINITY, |m, &x| m.min(x)),
-            mx.iter().fold(f32::NEG_INFINITY, |m, &x| m.max(x)),
-        );
-        extent = extent.max(mx - mn);
-    }
-    (hi - lo).max_element() <= extent * super::COHERENT_MAX_ORIGIN_SPREAD
 }
 
 /// The lanes of up to `K` rays whose slab test, as single-ray traversal runs it at the root,
@@ -218,43 +226,41 @@ pub(super) fn coherent<L: Lane, const N: usize, const K: usize>(
 pub(super) fn root_lanes<L: Lane, const N: usize, R: Lane, const K: usize>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[Ray],
-) -> u32 {
-    let Some(root) = bvh.nodes.first() else {
-        return 0;
-    };
-    // Rays to lanes; lanes past `rays` are invalid (a NaN origin).
-    let (mut o, mut d) = ([[f32::NAN; K]; 3], [[1.0f32; K]; 3]);
-    let (mut tmin, mut tmax) = ([0f32; K], [0f32; K]);
-    for (i, r) in rays.iter().take(K).enumerate() {
-        for a in 0..3 {
-            o[a][i] = r.origin[a];
-            d[a][i] = r.direction[a];
-        }
-        (tmin[i], tmax[i]) = (r.tmin, r.tmax);
-    }
-    let load3 = |v: &[[f32; K]; 3]| [R::load(&v[0]), R::load(&v[1]), R::load(&v[2])];
-    let (origin, raw) = (load3(&o), load3(&d));
-    let (tmin, tmax) = (R::load(&tmin), R::load(&tmax));
+) -> (u32, Slabs<R>) {
+    // Rays to lanes, transposed in registers; lanes past `rays` are invalid (a NaN origin).
+    let [ox, oy, oz, tmin, dx, dy, dz, tmax] = ray_lanes::<R, K>(rays);
+    let (origin, raw) = ([ox, oy, oz], [dx, dy, dz]);
     let (zero, inf) = (R::splat(0.0), R::splat(f32::INFINITY));
     // Valid (`Ray::is_valid`, the flushed direction not zero): finite origin and direction,
     // no NaN bound.
     let mut valid = tmin.eq(tmin) & tmax.eq(tmax);
     let mut moving = zero.ne(zero);
-    let mut inv = [zero; 3];
+    let (mut inv, mut flushed) = ([zero; 3], [zero; 3]);
     for a in 0..3 {
         // Subnormal components flushed to a zero of their sign, as `PreparedRay::new` does.
-        let flushed = raw[a]
+        flushed[a] = raw[a]
             .abs()
             .lt(R::splat(f32::MIN_POSITIVE))
             .select(zero.xor_sign(raw[a]), raw[a]);
         valid = valid & origin[a].abs().lt(inf) & raw[a].abs().lt(inf);
-        moving = moving | flushed.ne(zero);
-        inv[a] = R::splat(1.0) / flushed;
+        moving = moving | flushed[a].ne(zero);
+        inv[a] = R::splat(1.0) / flushed[a];
     }
     let valid = valid & moving;
     let (tmin, tmax) = (valid.select(tmin, inf), valid.select(tmax, R::splat(f32::NEG_INFINITY)));
     // Full lane masks of the reciprocal's sign (what `neg` holds); invalid lanes miss anyway.
     let neg = inv.map(|v| v.lt(zero));
+    let lanes = Slabs {
+        origin,
+        direction: flushed,
+        inv_dir: inv,
+        tmin,
+        tmax,
+        neg,
+    };
+    let Some(root) = bvh.nodes.first() else {
+        return (0, lanes);
+    };
     let (mut lo, mut hi) = ([[0f32; N]; 3], [[0f32; N]; 3]);
     for a in 0..3 {
         root.bounds.min[a].store(&mut lo[a]);
@@ -264,10 +270,13 @@ pub(super) fn root_lanes<L: Lane, const N: usize, R: Lane, const K: usize>(
     for (c, &child) in root.child.iter().enumerate() {
         if child != EMPTY_CHILD {
             let b = |v: &[[f32; N]; 3]| [v[0][c], v[1][c], v[2][c]];
-            enter |= box_slabs(&origin, &inv, tmin, tmax, &neg, b(&lo), b(&hi)).1;
+            enter |= box_slabs(&lanes.origin, &lanes.inv_dir, tmin, tmax, &lanes.neg, b(&lo), b(&hi)).1;
         }
     }
-    enter & valid.bitmask() & ((1u64 << rays.len().min(K)) - 1) as u32
+    (
+        enter & valid.bitmask() & ((1u64 << rays.len().min(K)) - 1) as u32,
+        lanes,
+    )
 }
 
 /// `true` if the hybrid will send these rays to single-ray traversal at the root whatever they
@@ -291,27 +300,22 @@ pub(super) fn prepare_into<const K: usize>(rays: &[Ray], single: &mut [PreparedR
     }
 }
 
-/// The lanes whose interval `[tmin, tmax)` is not empty.
-#[inline(always)]
-fn active_of<const K: usize>(single: &[PreparedRay; K]) -> u32 {
-    single
-        .iter()
-        .enumerate()
-        .fold(0, |m, (i, r)| m | ((r.tmin < r.tmax) as u32) << i)
-}
-
 /// How a packet starts, decided once for [`intersect`] and [`occluded`].
-enum Start {
+enum Start<R> {
     /// The hybrid's answer at the root, without the packet's setup: every ray as a single ray.
     Singles,
     /// No lane enters the scene (or none has a ray): every answer is a miss.
     Miss,
-    /// The lanes were prepared (into the caller's array): those with a ray (`active`), and
-    /// whether they are [`coherent`].
-    Prepared { active: u32, coherent: bool },
+    /// The rays were prepared (into the caller's array) and are in `lanes`: the lanes with a
+    /// ray (`active`), and whether they are [`coherent`](Slabs::coherent).
+    Prepared {
+        active: u32,
+        coherent: bool,
+        lanes: Slabs<R>,
+    },
 }
 
-/// PERF: the prepared lanes go to the caller's array, not out in the enum: returning them by
+/// PERF: the prepared rays go to the caller's array, not out in the enum: returning them by
 /// value cost a 704-byte `memcpy` per packet.
 #[inline(always)]
 fn start<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
@@ -319,21 +323,23 @@ fn start<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
     rays: &[Ray],
     switch: u32,
     single: &mut [PreparedRay; K],
-) -> Start {
+) -> Start<R> {
     if to_singles(rays, switch) {
         return Start::Singles;
     }
     // `root_lanes` is 0 for an empty tree too.
-    if root_lanes::<L, N, R, K>(bvh, rays) == 0 {
+    let (enter, lanes) = root_lanes::<L, N, R, K>(bvh, rays);
+    let active = lanes.active();
+    if enter == 0 || active == 0 {
         return Start::Miss;
     }
     prepare_into(rays, single, T::WATERTIGHT);
-    let active = active_of(single);
-    if active == 0 {
-        return Start::Miss;
+    let coherent = lanes.coherent(bvh, active);
+    Start::Prepared {
+        active,
+        coherent,
+        lanes,
     }
-    let coherent = coherent(bvh, single, active);
-    Start::Prepared { active, coherent }
 }
 
 /// `dst = src[..dst.len()]`, with a fixed-size copy for a full packet (the common case) instead
@@ -356,7 +362,7 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
 ) {
     let n = rays.len().min(hits.len()).min(K);
     let mut single = [PreparedRay::EMPTY; K];
-    let (active, coherent) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
+    let (active, coherent, lanes) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (h, r) in hits[..n].iter_mut().zip(rays) {
                 *h = crate::traverse::wide::intersect::<T, L, N>(bvh, r);
@@ -369,7 +375,11 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
             copy_out(&mut hits[..n], &[None; K]);
             return;
         }
-        Start::Prepared { active, coherent } => (active, coherent),
+        Start::Prepared {
+            active,
+            coherent,
+            lanes,
+        } => (active, coherent, lanes),
     };
     let mut best: [Option<Hit>; K] = [None; K];
     if !coherent && active.count_ones() < switch {
@@ -380,11 +390,11 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
             m &= m - 1;
             best[i] = intersect_from::<T, L, N>(bvh, 0, &mut single[i]);
         }
+    } else if coherent {
+        walk_interval::<T, L, N, R, K, false>(bvh, lanes, &mut single, &mut best, active);
     } else {
-        let neg = sign_lanes::<R, K>(&single);
-        if coherent {
-            walk_interval::<T, L, N, R, K, false>(bvh, &neg, &mut single, &mut best, active);
-        } else {
+        let neg = lanes.neg;
+        {
             let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
             let mut lanes = Leaves::<R, K>::new(&single);
             let mut w = Walk {
@@ -409,7 +419,7 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
 ) {
     let n = rays.len().min(occluded.len()).min(K);
     let mut single = [PreparedRay::EMPTY; K];
-    let (active, coherent) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
+    let (active, coherent, lanes) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (o, r) in occluded[..n].iter_mut().zip(rays) {
                 *o = crate::traverse::wide::occluded::<T, L, N>(bvh, r);
@@ -420,7 +430,11 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
             occluded[..n].fill(false);
             return;
         }
-        Start::Prepared { active, coherent } => (active, coherent),
+        Start::Prepared {
+            active,
+            coherent,
+            lanes,
+        } => (active, coherent, lanes),
     };
     let mut mask = 0u32;
     if !coherent && active.count_ones() < switch {
@@ -432,12 +446,12 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
                 mask |= 1 << i;
             }
         }
+    } else if coherent {
+        mask = walk_interval::<T, L, N, R, K, true>(bvh, lanes, &mut single, &mut [None; K], active);
     } else {
         let mut best = [None; K];
-        let neg = sign_lanes::<R, K>(&single);
-        if coherent {
-            mask = walk_interval::<T, L, N, R, K, true>(bvh, &neg, &mut single, &mut best, active);
-        } else {
+        let neg = lanes.neg;
+        {
             let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
             let mut lanes = Leaves::<R, K>::new(&single);
             let mut w = Walk {
@@ -707,25 +721,18 @@ struct Interval {
 }
 
 impl Interval {
-    fn new<const K: usize>(single: &[PreparedRay; K], active: u32) -> Self {
-        let mut iv = Interval {
-            o: [(f32::INFINITY, f32::NEG_INFINITY); 3],
-            inv: [(f32::INFINITY, f32::NEG_INFINITY); 3],
-            tmin: f32::INFINITY,
-            tmax: f32::NEG_INFINITY,
-        };
-        for (i, r) in single.iter().enumerate() {
-            if active >> i & 1 == 0 {
-                continue;
-            }
-            for a in 0..3 {
-                iv.o[a] = (iv.o[a].0.min(r.origin[a]), iv.o[a].1.max(r.origin[a]));
-                iv.inv[a] = (iv.inv[a].0.min(r.inv_dir[a]), iv.inv[a].1.max(r.inv_dir[a]));
-            }
-            iv.tmin = iv.tmin.min(r.tmin);
-            iv.tmax = iv.tmax.max(r.tmax);
+    /// The interval of the lanes of `active` (masked reductions in registers).
+    #[inline(always)]
+    fn new<R: Lane>(p: &Slabs<R>, active: u32) -> Self {
+        let on = R::from_bitmask(active);
+        let lo = |v: R| on.select(v, R::splat(f32::INFINITY)).min_lane();
+        let hi = |v: R| on.select(v, R::splat(f32::NEG_INFINITY)).max_lane();
+        Interval {
+            o: p.origin.map(|v| (lo(v), hi(v))),
+            inv: p.inv_dir.map(|v| (lo(v), hi(v))),
+            tmin: lo(p.tmin),
+            tmax: hi(p.tmax),
         }
-        iv
     }
 }
 
@@ -747,16 +754,15 @@ fn product_bounds<L: Lane>(a0: L, a1: L, b0: f32, b1: f32) -> (L, L) {
 /// single rays. Returns the occluded lanes (`ANY`) or 0.
 fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool>(
     bvh: BvhWideRef<'_, L, N>,
-    neg_lanes: &[R; 3],
+    mut p: Slabs<R>,
     single: &mut [PreparedRay; K],
     best: &mut [Option<Hit>; K],
     mut active: u32,
 ) -> u32 {
-    let mut p = Slabs::<R>::new(single);
     let mut occluded = 0u32;
-    let mut iv = Interval::new(single, active);
-    let signs = single[active.trailing_zeros() as usize % K].sign_bits();
-    let neg = [signs & 1 != 0, signs & 2 != 0, signs & 4 != 0];
+    let mut iv = Interval::new(&p, active);
+    let first = active.trailing_zeros();
+    let neg = p.neg.map(|n| n.bitmask() >> first & 1 != 0);
     let slack = L::splat(FAR_SLACK);
     let mut stack = MaskStack::<STACK>::new();
     let mut cur = 0u32;
@@ -820,7 +826,7 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                         let lane_mask = if child & LEAF_BIT != 0 {
                             // PERF: a leaf's triangles cost more than one more box test per lane.
                             let b = |v: &[[f32; N]; 3]| [v[0][i], v[1][i], v[2][i]];
-                            box_slabs(&p.origin, &p.inv_dir, p.tmin, p.tmax, neg_lanes, b(&bmin), b(&bmax)).1 & active
+                            box_slabs(&p.origin, &p.inv_dir, p.tmin, p.tmax, &p.neg, b(&bmin), b(&bmax)).1 & active
                         } else {
                             active
                         };
@@ -864,9 +870,10 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                     } else {
                         None
                     };
-                    let h = match tri_major {
+                    match tri_major {
                         Some((h, t, u, v, prim)) => {
                             if h != 0 {
+                                p.tmax = R::from_bitmask(h).select(t, p.tmax);
                                 let (mut ta, mut ua, mut va, mut pa) = ([0f32; K], [0f32; K], [0f32; K], [0f32; K]);
                                 t.store(&mut ta);
                                 u.store(&mut ua);
@@ -887,12 +894,14 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                             }
                             h
                         }
-                        None => closest_rays::<T, L, N, K>(packs, single, best, m),
-                    };
-                    if h != 0 {
-                        p.tmax = tmax_lanes::<R, K>(single);
+                        None => {
+                            let h = closest_rays::<T, L, N, K>(packs, single, best, m);
+                            if h != 0 {
+                                p.tmax = tmax_lanes::<R, K>(single);
+                            }
+                            h
+                        }
                     }
-                    h
                 };
                 if hit_any != 0 && ANY {
                     // Any hit: retire the lanes hit; stop when none is left.
@@ -901,12 +910,12 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                     if active == 0 {
                         return occluded;
                     }
-                    p.tmax = lane_mask::<R, K>(active).select(p.tmax, R::splat(f32::NEG_INFINITY));
-                    iv = Interval::new(single, active);
+                    p.tmax = R::from_bitmask(active).select(p.tmax, R::splat(f32::NEG_INFINITY));
+                    iv = Interval::new(&p, active);
                 } else if hit_any != 0 {
-                    iv.tmax = (0..K)
-                        .filter(|i| active >> i & 1 == 1)
-                        .fold(f32::NEG_INFINITY, |m, i| m.max(single[i].tmax));
+                    iv.tmax = R::from_bitmask(active)
+                        .select(p.tmax, R::splat(f32::NEG_INFINITY))
+                        .max_lane();
                 }
             }
         }
@@ -986,6 +995,28 @@ mod tests {
             .collect()
     }
 
+    /// The packet's lanes hold, bit for bit, the fields of the rays prepared one by one in every
+    /// valid lane, and the same active lanes (those with a non-empty interval) in all lanes.
+    fn same_as_prepared<R: Lane>(lanes: &Slabs<R>, rays: &[Ray]) {
+        let mut active = 0;
+        for (i, r) in rays.iter().take(R::N).enumerate() {
+            let p = PreparedRay::new(r);
+            active |= (!p.is_empty() as u32) << i;
+            if p == PreparedRay::EMPTY {
+                continue;
+            }
+            let bits = |v: &[R; 3]| [v[0].at(i).to_bits(), v[1].at(i).to_bits(), v[2].at(i).to_bits()];
+            let want = |v: Vec3| v.to_array().map(f32::to_bits);
+            assert_eq!(bits(&lanes.origin), want(p.origin), "{r:?}");
+            assert_eq!(bits(&lanes.direction), want(p.direction), "{r:?}");
+            assert_eq!(bits(&lanes.inv_dir), want(p.inv_dir), "{r:?}");
+            assert_eq!(lanes.tmin.at(i).to_bits(), p.tmin.to_bits(), "{r:?}");
+            assert_eq!(lanes.tmax.at(i).to_bits(), p.tmax.to_bits(), "{r:?}");
+            assert_eq!(lanes.neg.map(|n| n.bitmask() >> i & 1 == 1), p.neg, "{r:?}");
+        }
+        assert_eq!(lanes.active(), active, "{rays:?}");
+    }
+
     #[test]
     fn root_lanes_are_the_single_ray_root_test() {
         let tris = crate::scene::thin_soup(300, 4);
@@ -1005,14 +1036,16 @@ mod tests {
                     .fold(0u32, |m, (i, r)| m | (f(r) as u32) << i)
             };
             let w8 = want(8, &|r| enters(b8.view(), r));
-            assert_eq!(root_lanes::<f32x8, 8, f32x8, 8>(b8.view(), &rs), w8, "{rs:?}");
-            assert_eq!(root_lanes::<f32x8, 8, f32x4, 4>(b8.view(), &rs), w8 & 0xf, "{rs:?}");
+            let (e8, l8) = root_lanes::<f32x8, 8, f32x8, 8>(b8.view(), &rs);
+            assert_eq!(e8, w8, "{rs:?}");
+            same_as_prepared(&l8, &rs);
+            let (e4, l4) = root_lanes::<f32x8, 8, f32x4, 4>(b8.view(), &rs);
+            assert_eq!(e4, w8 & 0xf, "{rs:?}");
+            same_as_prepared(&l4, &rs);
             let w4 = want(16, &|r| enters(b4.view(), r));
-            assert_eq!(
-                root_lanes::<f32x4, 4, crate::math::f32x16, 16>(b4.view(), &rs),
-                w4,
-                "{rs:?}"
-            );
+            let (e16, l16) = root_lanes::<f32x4, 4, crate::math::f32x16, 16>(b4.view(), &rs);
+            assert_eq!(e16, w4, "{rs:?}");
+            same_as_prepared(&l16, &rs);
             entered += w8.count_ones();
         }
         assert!(entered > 3000, "too few rays enter the scene to test much: {entered}");
