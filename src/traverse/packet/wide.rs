@@ -306,8 +306,9 @@ enum Start<R> {
     Singles,
     /// No lane enters the scene (or none has a ray): every answer is a miss.
     Miss,
-    /// The rays were prepared (into the caller's array) and are in `lanes`: the lanes with a
-    /// ray (`active`), and whether they are [`coherent`](Slabs::coherent).
+    /// The rays are in `lanes`, and prepared into the caller's array unless `coherent` (the
+    /// interval walk prepares them where it needs them): the lanes with a ray (`active`), and
+    /// whether they are [`coherent`](Slabs::coherent).
     Prepared {
         active: u32,
         coherent: bool,
@@ -333,8 +334,12 @@ fn start<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
     if enter == 0 || active == 0 {
         return Start::Miss;
     }
-    prepare_into(rays, single, T::WATERTIGHT);
     let coherent = lanes.coherent(bvh, active);
+    if !coherent {
+        // The masked walk and the hybrid's single rays start from prepared rays; the interval
+        // walk prepares them only where it needs them.
+        prepare_into(rays, single, T::WATERTIGHT);
+    }
     Start::Prepared {
         active,
         coherent,
@@ -391,7 +396,7 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
             best[i] = intersect_from::<T, L, N>(bvh, 0, &mut single[i]);
         }
     } else if coherent {
-        walk_interval::<T, L, N, R, K, false>(bvh, lanes, &mut single, &mut best, active);
+        walk_interval::<T, L, N, R, K, false>(bvh, lanes, &rays[..n], &mut single, &mut best, active);
     } else {
         let neg = lanes.neg;
         {
@@ -447,7 +452,7 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
             }
         }
     } else if coherent {
-        mask = walk_interval::<T, L, N, R, K, true>(bvh, lanes, &mut single, &mut [None; K], active);
+        mask = walk_interval::<T, L, N, R, K, true>(bvh, lanes, &rays[..n], &mut single, &mut [None; K], active);
     } else {
         let mut best = [None; K];
         let neg = lanes.neg;
@@ -755,10 +760,33 @@ fn product_bounds<L: Lane>(a0: L, a1: L, b0: f32, b1: f32) -> (L, L) {
 fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool>(
     bvh: BvhWideRef<'_, L, N>,
     mut p: Slabs<R>,
+    rays: &[Ray],
     single: &mut [PreparedRay; K],
     best: &mut [Option<Hit>; K],
     mut active: u32,
 ) -> u32 {
+    // The rays as single rays, prepared only where a kernel needs them (most coherent packets
+    // never do: their leaves take the triangle-major kernel), with the lanes' `tmax` so far.
+    // PERF: preparing all `K` up front was 6% of a coherent packet's time.
+    let mut ready = false;
+    #[inline(always)]
+    fn singles<R: Lane, const K: usize>(
+        ready: &mut bool,
+        watertight: bool,
+        rays: &[Ray],
+        single: &mut [PreparedRay; K],
+        tmax: R,
+        active: u32,
+    ) {
+        if !core::mem::replace(ready, true) {
+            prepare_into(rays, single, watertight);
+            for (i, s) in single.iter_mut().enumerate() {
+                if active >> i & 1 == 1 {
+                    s.tmax = tmax.at(i);
+                }
+            }
+        }
+    }
     let mut occluded = 0u32;
     let mut iv = Interval::new(&p, active);
     let first = active.trailing_zeros();
@@ -773,6 +801,7 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
     loop {
         if budget == 0 {
             // A malformed view or a stack overflow: finish the active lanes as single rays.
+            singles(&mut ready, T::WATERTIGHT, rays, single, p.tmax, active);
             let mut m = active;
             while m != 0 {
                 let i = m.trailing_zeros() as usize;
@@ -855,6 +884,7 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                 // earlier packet kernel per triangle (AoS triangles, per-bit commits) measured
                 // 1.1-2x slower; the SoA one below wins where the packet fills its lanes.
                 let hit_any = if ANY {
+                    singles(&mut ready, T::WATERTIGHT, rays, single, p.tmax, active);
                     any_rays::<T, L, N, K>(packs, single, m)
                 } else {
                     // PERF: where the packet is at least as wide as the packs and at least half
@@ -883,7 +913,10 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                                 while b != 0 {
                                     let l = b.trailing_zeros() as usize % K;
                                     b &= b - 1;
-                                    single[l].tmax = ta[l];
+                                    if ready {
+                                        // Prepared singles keep their `tmax` in step.
+                                        single[l].tmax = ta[l];
+                                    }
                                     best[l] = Some(Hit {
                                         t: ta[l],
                                         u: ua[l],
@@ -895,6 +928,7 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                             h
                         }
                         None => {
+                            singles(&mut ready, T::WATERTIGHT, rays, single, p.tmax, active);
                             let h = closest_rays::<T, L, N, K>(packs, single, best, m);
                             if h != 0 {
                                 p.tmax = tmax_lanes::<R, K>(single);
