@@ -398,19 +398,19 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     } else if coherent {
         walk_interval::<T, L, N, R, K, false>(bvh, lanes, &rays[..n], &mut single, &mut best, active);
     } else {
+        // The sign masks of the root test's lanes (the same as the prepared rays', and full
+        // lane masks in every lane).
         let neg = lanes.neg;
-        {
-            let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
-            let mut lanes = Leaves::<R, K>::new(&single);
-            let mut w = Walk {
-                packet: &mut packet,
-                neg: &neg,
-                single: &mut single,
-                lanes: &mut lanes,
-                best: &mut best,
-            };
-            w.run::<T, L, N, false>(bvh, active, switch);
-        }
+        let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
+        let mut leaves = Leaves::<R, K>::new(&single);
+        let mut w = Walk {
+            packet: &mut packet,
+            neg: &neg,
+            single: &mut single,
+            lanes: &mut leaves,
+            best: &mut best,
+        };
+        w.run::<T, L, N, false>(bvh, active, switch);
     }
     copy_out(&mut hits[..n], &best);
 }
@@ -455,19 +455,19 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
         mask = walk_interval::<T, L, N, R, K, true>(bvh, lanes, &rays[..n], &mut single, &mut [None; K], active);
     } else {
         let mut best = [None; K];
+        // The sign masks of the root test's lanes (the same as the prepared rays', and full
+        // lane masks in every lane).
         let neg = lanes.neg;
-        {
-            let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
-            let mut lanes = Leaves::<R, K>::new(&single);
-            let mut w = Walk {
-                packet: &mut packet,
-                neg: &neg,
-                single: &mut single,
-                lanes: &mut lanes,
-                best: &mut best,
-            };
-            mask = w.run::<T, L, N, true>(bvh, active, switch);
-        }
+        let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
+        let mut leaves = Leaves::<R, K>::new(&single);
+        let mut w = Walk {
+            packet: &mut packet,
+            neg: &neg,
+            single: &mut single,
+            lanes: &mut leaves,
+            best: &mut best,
+        };
+        mask = w.run::<T, L, N, true>(bvh, active, switch);
     }
     for (i, o) in occluded[..n].iter_mut().enumerate() {
         *o = mask >> i & 1 == 1;
