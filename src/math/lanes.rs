@@ -99,6 +99,20 @@ pub trait Lane:
     fn transpose8(rows: &[[f32; 8]]) -> [Self; 8];
 }
 
+/// `f` folded over the lanes as a tree (halves, then quarters): a horizontal reduction in
+/// registers, the same pairing for every width.
+#[inline(always)]
+fn fold_tree<const N: usize>(mut a: [f32; N], f: fn(f32, f32) -> f32) -> f32 {
+    let mut w = N / 2;
+    while w > 0 {
+        for i in 0..w {
+            a[i] = f(a[i], a[i + w]);
+        }
+        w /= 2;
+    }
+    a[0]
+}
+
 macro_rules! impl_lane {
     ($t:ty, $i:ty, $n:expr, |$rows:ident| $transpose:block) => {
         impl Lane for $t {
@@ -196,28 +210,11 @@ macro_rules! impl_lane {
             }
             #[inline(always)]
             fn min_lane(self) -> f32 {
-                // A tree: halves, then quarters, as a horizontal reduction in registers.
-                let mut a = self.to_array();
-                let mut w = $n / 2;
-                while w > 0 {
-                    for i in 0..w {
-                        a[i] = crate::math::min_l(a[i], a[i + w]);
-                    }
-                    w /= 2;
-                }
-                a[0]
+                fold_tree(self.to_array(), crate::math::min_l)
             }
             #[inline(always)]
             fn max_lane(self) -> f32 {
-                let mut a = self.to_array();
-                let mut w = $n / 2;
-                while w > 0 {
-                    for i in 0..w {
-                        a[i] = crate::math::max_l(a[i], a[i + w]);
-                    }
-                    w /= 2;
-                }
-                a[0]
+                fold_tree(self.to_array(), crate::math::max_l)
             }
             #[inline(always)]
             fn transpose8($rows: &[[f32; 8]]) -> [Self; 8] {

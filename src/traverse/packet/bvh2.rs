@@ -4,7 +4,7 @@
 
 use super::leaf::Leaves;
 use super::stack::{Entry, MaskStack};
-use super::wide::{box_lanes, hit_min, lane_mask, open_lanes, prepare_into, sign_lanes};
+use super::wide::{box_lanes, hit_min, open_lanes, prepare_into, sign_lanes};
 use crate::geometry::{Hit, Ray, Triangles};
 use crate::intersect::{PreparedPacket, PreparedRay};
 use crate::math::Lane;
@@ -93,7 +93,7 @@ pub(super) fn run<T: TriangleTest, P: Triangles + ?Sized, R: Lane, const K: usiz
                     if active == 0 {
                         return occluded;
                     }
-                    packet.tmax = lane_mask::<R, K>(active).select(packet.tmax, R::splat(f32::NEG_INFINITY));
+                    packet.tmax = R::from_bitmask(active).select(packet.tmax, R::splat(f32::NEG_INFINITY));
                 } else {
                     let mut h = hit_any;
                     while h != 0 {

@@ -5,7 +5,6 @@
 //! fallback) holds 8 lanes, and half packets share more work on incoherent leaves. Boxes are still
 //! tested 16 lanes at a time.
 
-use super::wide::lane_mask;
 use crate::geometry::{Hit, Triangle};
 use crate::intersect::{HitLanes, PreparedPacket, PreparedPacket8, PreparedRay, TriangleLanes};
 use crate::math::{Lane, f32x8};
@@ -57,7 +56,7 @@ impl<R: Lane, const K: usize> Leaves<R, K> {
         match &mut self.halves {
             None => {
                 self.keep = packet.tmax;
-                self.inside = lane_mask::<R, K>(mask);
+                self.inside = R::from_bitmask(mask);
                 packet.tmax = self.inside.select(packet.tmax, R::splat(f32::NEG_INFINITY));
             }
             Some(halves) => {
@@ -67,7 +66,7 @@ impl<R: Lane, const K: usize> Leaves<R, K> {
                     let m = mask >> (8 * h) & 0xff;
                     if m != 0 {
                         let tmax = f32x8::load(&t[8 * h..]);
-                        half.p.tmax = lane_mask::<f32x8, 8>(m).select(tmax, f32x8::splat(f32::NEG_INFINITY));
+                        half.p.tmax = f32x8::from_bitmask(m).select(tmax, f32x8::splat(f32::NEG_INFINITY));
                     }
                 }
             }

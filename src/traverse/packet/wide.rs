@@ -16,18 +16,6 @@ use crate::traverse::wide::intersect_from;
 /// Stack entries: enough for `MAX_WIDE_DEPTH` levels of 8-wide nodes.
 const STACK: usize = MAX_WIDE_DEPTH as usize * 7 + 1;
 
-/// All bits set in the lanes of `bits`, zero elsewhere.
-#[inline(always)]
-pub(super) fn lane_mask<R: Lane, const K: usize>(bits: u32) -> R {
-    let mut m = [0f32; K];
-    for (i, x) in m.iter_mut().enumerate() {
-        if bits >> i & 1 == 1 {
-            *x = f32::from_bits(u32::MAX);
-        }
-    }
-    R::load(&m)
-}
-
 /// A lane mask per axis: all bits set in the lanes whose direction has its sign bit set, zero
 /// elsewhere.
 ///
@@ -398,19 +386,7 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     } else if coherent {
         walk_interval::<T, L, N, R, K, false>(bvh, lanes, &rays[..n], &mut single, &mut best, active);
     } else {
-        // The sign masks of the root test's lanes (the same as the prepared rays', and full
-        // lane masks in every lane).
-        let neg = lanes.neg;
-        let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
-        let mut leaves = Leaves::<R, K>::new(&single);
-        let mut w = Walk {
-            packet: &mut packet,
-            neg: &neg,
-            single: &mut single,
-            lanes: &mut leaves,
-            best: &mut best,
-        };
-        w.run::<T, L, N, false>(bvh, active, switch);
+        masked_walk::<T, L, N, R, K, false>(bvh, &lanes.neg, &mut single, &mut best, active, switch);
     }
     copy_out(&mut hits[..n], &best);
 }
@@ -455,23 +431,35 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
         mask = walk_interval::<T, L, N, R, K, true>(bvh, lanes, &rays[..n], &mut single, &mut [None; K], active);
     } else {
         let mut best = [None; K];
-        // The sign masks of the root test's lanes (the same as the prepared rays', and full
-        // lane masks in every lane).
-        let neg = lanes.neg;
-        let mut packet = PreparedPacket::<R, K>::from_prepared(&single);
-        let mut leaves = Leaves::<R, K>::new(&single);
-        let mut w = Walk {
-            packet: &mut packet,
-            neg: &neg,
-            single: &mut single,
-            lanes: &mut leaves,
-            best: &mut best,
-        };
-        mask = w.run::<T, L, N, true>(bvh, active, switch);
+        mask = masked_walk::<T, L, N, R, K, true>(bvh, &lanes.neg, &mut single, &mut best, active, switch);
     }
     for (i, o) in occluded[..n].iter_mut().enumerate() {
         *o = mask >> i & 1 == 1;
     }
+}
+
+/// The masked walk of prepared rays (incoherent packets with at least `switch` lanes), with the
+/// sign masks of the root test's lanes (the prepared rays' signs, full lane masks in every lane).
+/// Returns the occluded lanes (`ANY`) or 0.
+#[inline(always)]
+fn masked_walk<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool>(
+    bvh: BvhWideRef<'_, L, N>,
+    neg: &[R; 3],
+    single: &mut [PreparedRay; K],
+    best: &mut [Option<Hit>; K],
+    active: u32,
+    switch: u32,
+) -> u32 {
+    let mut packet = PreparedPacket::<R, K>::from_prepared(single);
+    let mut leaves = Leaves::<R, K>::new(single);
+    Walk {
+        packet: &mut packet,
+        neg,
+        single,
+        lanes: &mut leaves,
+        best,
+    }
+    .run::<T, L, N, ANY>(bvh, active, switch)
 }
 
 /// Any hit of the prepared ray `r` in the subtree below child code `start` (`0`: the whole
@@ -685,7 +673,7 @@ impl<R: Lane, const K: usize> Walk<'_, R, K> {
     /// Retired lanes get an empty interval (`tmax = -inf`): no box or triangle test accepts them.
     #[inline(always)]
     fn retire(&mut self, active: u32) {
-        self.packet.tmax = lane_mask::<R, K>(active).select(self.packet.tmax, R::splat(f32::NEG_INFINITY));
+        self.packet.tmax = R::from_bitmask(active).select(self.packet.tmax, R::splat(f32::NEG_INFINITY));
     }
 
     /// Tests the leaf `code` against the lanes of `mask` (the others are masked off for the call);
