@@ -155,6 +155,7 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
         ),
         ("hlbvh+treelets (hybrid)", BuildParams::hybrid()),
         ("hlbvh-sah (hybrid_sah)", BuildParams::hybrid_sah()),
+        ("ploc", BuildParams::ploc()),
         (
             "lbvh30+rotations",
             BuildParams {

@@ -856,6 +856,7 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
         ("sweep = quality()", BuildParams::quality()),
         ("hlbvh+treelets = hybrid()", BuildParams::hybrid()),
         ("hlbvh-sah = hybrid_sah()", BuildParams::hybrid_sah()),
+        ("ploc = ploc()", BuildParams::ploc()),
         (
             "fast()+treelets",
             BuildParams {

@@ -46,6 +46,14 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
                 ..BuildParams::fastest()
             },
         ),
+        ("ploc", BuildParams::ploc()),
+        (
+            "ploc63",
+            BuildParams {
+                morton_bits: MortonBits::Bits63,
+                ..BuildParams::ploc()
+            },
+        ),
         ("hybrid", BuildParams::hybrid()),
         ("hybrid_sah", BuildParams::hybrid_sah()),
         (

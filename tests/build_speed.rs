@@ -28,6 +28,14 @@ fn speed() {
             },
         ),
         ("fast", BuildParams::fast()),
+        ("ploc", BuildParams::ploc()),
+        (
+            "ploc63",
+            BuildParams {
+                morton_bits: MortonBits::Bits63,
+                ..BuildParams::ploc()
+            },
+        ),
         (
             "binned8all",
             BuildParams {

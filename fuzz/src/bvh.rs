@@ -99,6 +99,11 @@ pub fn builders() -> Vec<BuildParams> {
             morton_bits: MortonBits::Bits63,
             ..BuildParams::hybrid_sah()
         },
+        BuildParams::ploc(),
+        BuildParams {
+            morton_bits: MortonBits::Bits63,
+            ..BuildParams::ploc()
+        },
     ]
 }
 

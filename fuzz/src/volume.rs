@@ -46,9 +46,9 @@
 use crate::decode::{Input, Mode, negative_zeros};
 use strahl::math::f32x8;
 use strahl::volume::{
-    EmptyRegion, GridParams, Lookup, MAX_EMPTY_RADIUS, MAX_STEPS_LIMIT, Macrocell, MacrocellGrid, MarchParams,
-    COLOR_MAX, MarchStats, Medium, Rgba, Sampling, TAU_MAX, TfEntry, TransferFunction, Volume, VolumeError, VolumeMedium, Voxel,
-    integrate, integrate_ray, integrate_scalar, integrate_x8,
+    COLOR_MAX, EmptyRegion, GridParams, Lookup, MAX_EMPTY_RADIUS, MAX_STEPS_LIMIT, Macrocell, MacrocellGrid,
+    MarchParams, MarchStats, Medium, Rgba, Sampling, TAU_MAX, TfEntry, TransferFunction, Volume, VolumeError,
+    VolumeMedium, Voxel, integrate, integrate_ray, integrate_scalar, integrate_x8,
 };
 use strahl::{Aabb, Ray, Vec3};
 

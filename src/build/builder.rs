@@ -6,7 +6,7 @@ use super::radix::Item;
 use super::treelet::{self, TreeletScratch, TreeletStats};
 use super::{
     BuildError, BuildParams, BuildStats, Bvh2, Primitives, Refine, Strategy, TreeletParams, ValidateError, hlbvh, lbvh,
-    sweep, topdown,
+    ploc, sweep, topdown,
 };
 use alloc::vec::Vec;
 
@@ -114,6 +114,7 @@ impl Builder {
                 Strategy::SweepSah => sweep::build(self, &info, params, out),
                 Strategy::Lbvh => lbvh::build(self, &info, params, out),
                 Strategy::Hlbvh | Strategy::HlbvhSah => hlbvh::build(self, &info, params, out),
+                Strategy::Ploc => ploc::build(self, &info, params, out),
             }
         };
         debug_assert_eq!(out.prim_indices.len(), n);
