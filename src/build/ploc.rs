@@ -136,6 +136,14 @@ fn merge(
     heights[w] = heights[i].max(heights[i + 1]) + 1;
 }
 
+/// Cluster `i` moved to slot `w` (`w <= i`).
+#[inline(always)]
+fn keep(boxes: &mut [PrimRef], links: &mut [Link], heights: &mut [u32], i: usize, w: usize) {
+    boxes[w] = boxes[i];
+    links[w] = links[i];
+    heights[w] = heights[i];
+}
+
 /// One agglomeration round (see the module docs): merges the neighbours that prefer each other,
 /// moves the clusters left, and returns the number of merges.
 fn sweep(boxes: &mut [PrimRef], links: &mut [Link], heights: &mut [u32], nodes: &mut alloc::vec::Vec<Node>) -> usize {
@@ -152,9 +160,7 @@ fn sweep(boxes: &mut [PrimRef], links: &mut [Link], heights: &mut [u32], nodes: 
     while i < m {
         if i + 1 == m {
             // The last cluster, alone.
-            boxes[w] = boxes[i];
-            links[w] = links[i];
-            heights[w] = heights[i];
+            keep(boxes, links, heights, i, w);
             break;
         }
         // `d(i + 1)`; infinite past the end.
@@ -177,9 +183,7 @@ fn sweep(boxes: &mut [PrimRef], links: &mut [Link], heights: &mut [u32], nodes: 
                 f32::INFINITY
             };
         } else {
-            boxes[w] = boxes[i];
-            links[w] = links[i];
-            heights[w] = heights[i];
+            keep(boxes, links, heights, i, w);
             w += 1;
             i += 1;
             (dp, di) = (di, dn);
@@ -205,9 +209,7 @@ fn pair_all(
         i += 2;
     }
     if i < m {
-        boxes[w] = boxes[i];
-        links[w] = links[i];
-        heights[w] = heights[i];
+        keep(boxes, links, heights, i, w);
     }
     m / 2
 }
