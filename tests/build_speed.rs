@@ -4,7 +4,9 @@
 //! warm its [`Builder`], then `STRAHL_REPS` timed builds (default 5), best and median. `STRAHL_N`
 //! sets the soup size (`scene::thin_soup(n, 1)`, default 2^20); `STRAHL_ONLY` a comma-separated
 //! list of builders (`fastest`, `lbvh63`, `fast`, `binned8all`, `balanced`, `median`, `quality`,
-//! `hlbvh`, `hybrid_sah`).
+//! `hlbvh`, `hybrid_sah`). `STRAHL_THREADS=t` (t > 1) also times `Builder::build_into_par` on `t`
+//! threads right after each builder's single-threaded builds (taking turns with them), with its
+//! speed-up; "CPU" is then the calling thread's only.
 
 use std::time::Instant;
 use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, Strategy};
@@ -17,6 +19,7 @@ fn speed() {
     let n: usize = env("STRAHL_N").and_then(|s| s.parse().ok()).unwrap_or(1 << 20);
     let reps: usize = env("STRAHL_REPS").and_then(|s| s.parse().ok()).unwrap_or(5).max(1);
     let only = env("STRAHL_ONLY");
+    let threads: usize = env("STRAHL_THREADS").and_then(|s| s.parse().ok()).unwrap_or(1);
     let soup = scene::thin_soup(n, 1);
     let list = [
         ("fastest", BuildParams::fastest()),
@@ -64,21 +67,45 @@ fn speed() {
         let mut bvh = Bvh2::default();
         b.build_into(&soup[..], p, &mut bvh).unwrap();
         let mut times = Vec::new();
-        let cpu0 = cpu_seconds();
+        let mut par_times = Vec::new();
+        let mut cpu = 0.0;
         for _ in 0..reps {
+            let cpu0 = cpu_seconds();
             let t0 = Instant::now();
             b.build_into(&soup[..], p, &mut bvh).unwrap();
             times.push(t0.elapsed().as_secs_f64());
+            cpu += cpu_seconds().zip(cpu0).map_or(f64::NAN, |(a, b)| a - b) / reps as f64;
+            if threads > 1 {
+                let mut par = Bvh2::default();
+                b.build_into_par(&soup[..], p, &mut par, threads).unwrap();
+                let t0 = Instant::now();
+                b.build_into_par(&soup[..], p, &mut par, threads).unwrap();
+                par_times.push(t0.elapsed().as_secs_f64());
+                assert_eq!(
+                    par.sah_cost(1.0, 1.0),
+                    bvh.sah_cost(1.0, 1.0),
+                    "{name}: parallel tree differs"
+                );
+            }
         }
-        let cpu = cpu_seconds().map(|c| (c - cpu0.unwrap_or(c)) / reps as f64);
         times.sort_by(f64::total_cmp);
+        par_times.sort_by(f64::total_cmp);
+        if let (Some(&best), Some(&med)) = (par_times.first(), par_times.get(par_times.len() / 2)) {
+            println!(
+                "{name:10} {threads} threads: best {:6.2} Mtri/s ({:7.2} ms, median {:7.2} ms): {:.2}x the best single-threaded",
+                n as f64 / best / 1e6,
+                best * 1e3,
+                med * 1e3,
+                times[0] / best
+            );
+        }
         let v = bvh.validate(&soup[..]).unwrap();
         println!(
             "{name:10} best {:6.2} Mtri/s ({:7.2} ms, median {:7.2} ms, CPU {:7.2} ms)  SAH {:8.3}  nodes {}  depth {}",
             n as f64 / times[0] / 1e6,
             times[0] * 1e3,
             times[times.len() / 2] * 1e3,
-            cpu.unwrap_or(f64::NAN) * 1e3,
+            cpu * 1e3,
             bvh.sah_cost(1.0, 1.0),
             bvh.nodes.len(),
             v.max_depth

@@ -66,7 +66,13 @@ pub struct Builder {
     pub(crate) walk: WalkStack,
     /// Treelet restructuring's per-node state.
     pub(crate) treelet: TreeletScratch,
+    /// The parallel build's per-worker arrays (`std`).
+    #[cfg(feature = "std")]
+    pub(crate) par: Vec<super::topdown::ParScratch>,
 }
+
+/// Builds of at most this many (valid) primitives run on the calling thread.
+const PAR_MIN: usize = 8192;
 
 /// What a builder reports besides the tree.
 #[derive(Clone, Copy, Debug, Default)]
@@ -101,19 +107,63 @@ impl Builder {
         params: &BuildParams,
         out: &mut Bvh2,
     ) -> Result<BuildStats, BuildError> {
+        self.build_into_with(prims, params, out, 1)
+    }
+
+    /// [`build_into`](Self::build_into) on up to `threads` threads (`std`). The tree is the one
+    /// the single-threaded build makes (the same nodes, boxes and leaves, so the same SAH cost
+    /// and the same hits), numbered in another order; for a given `threads`, every run makes
+    /// the same bytes.
+    ///
+    /// Parallel: the median and binned SAH builders ([`Strategy::Median`],
+    /// [`Strategy::BinnedSah`]: the top of the tree on the calling thread, then its subtrees side
+    /// by side) and the HLBVH with SAH mini-trees ([`Strategy::HlbvhSah`]: the mini-trees side by
+    /// side). The other strategies, and a refinement pass, run on the calling thread. Below
+    /// 8,192 primitives the build is single-threaded.
+    ///
+    /// ```
+    /// use strahl::{build::{Builder, BuildParams, Bvh2}, scene};
+    /// let soup = scene::thin_soup(50_000, 1);
+    /// let mut builder = Builder::new();
+    /// let (one, _) = builder.build(&soup[..], &BuildParams::fast()).unwrap();
+    /// let mut two = Bvh2::default();
+    /// builder.build_into_par(&soup[..], &BuildParams::fast(), &mut two, 2).unwrap();
+    /// assert!(two.validate(&soup[..]).is_ok());
+    /// assert_eq!(one.sah_cost(1.0, 1.0), two.sah_cost(1.0, 1.0));
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn build_into_par<P: Primitives + ?Sized>(
+        &mut self,
+        prims: &P,
+        params: &BuildParams,
+        out: &mut Bvh2,
+        threads: usize,
+    ) -> Result<BuildStats, BuildError> {
+        self.build_into_with(prims, params, out, threads.max(1))
+    }
+
+    fn build_into_with<P: Primitives + ?Sized>(
+        &mut self,
+        prims: &P,
+        params: &BuildParams,
+        out: &mut Bvh2,
+        threads: usize,
+    ) -> Result<BuildStats, BuildError> {
         params.check()?;
         let info = prims::prepare(prims, &mut self.refs)?;
         out.nodes.clear();
         out.prim_indices.clear();
         let n = self.refs.len();
+        // Small builds stay on this thread (the threads would cost more than they save).
+        let threads = if n <= PAR_MIN { 1 } else { threads };
         let c = if n == 0 {
             Counters::default()
         } else {
             match params.strategy {
-                Strategy::Median | Strategy::BinnedSah => topdown::build(self, &info, params, out),
+                Strategy::Median | Strategy::BinnedSah => topdown::build(self, &info, params, out, threads),
                 Strategy::SweepSah => sweep::build(self, &info, params, out),
                 Strategy::Lbvh => lbvh::build(self, &info, params, out),
-                Strategy::Hlbvh | Strategy::HlbvhSah => hlbvh::build(self, &info, params, out),
+                Strategy::Hlbvh | Strategy::HlbvhSah => hlbvh::build(self, &info, params, out, threads),
                 Strategy::Ploc => ploc::build(self, &info, params, out),
             }
         };

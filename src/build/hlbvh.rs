@@ -32,7 +32,7 @@ use crate::geometry::morton::{MortonQuantizer, morton63_scalar, morton63_x8};
 use alloc::vec::Vec;
 
 /// Builds an HLBVH.
-pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2) -> Counters {
+pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2, threads: usize) -> Counters {
     let cb = info.cbounds.to_aabb();
     match p.morton_bits {
         MortonBits::Bits30 => {
@@ -49,7 +49,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
             );
             core::mem::swap(&mut b.refs, &mut b.alt);
             let mut codes = core::mem::take(&mut b.items32);
-            let c = hierarchy(b, &codes, true, info, p, out);
+            let c = hierarchy(b, &codes, true, info, p, out, threads);
             core::mem::swap(&mut b.items32, &mut codes);
             c
         }
@@ -63,7 +63,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
             );
             sort_items(&mut b.items64, &mut b.tmp64, 63);
             let mut codes = core::mem::take(&mut b.items64);
-            let c = hierarchy(b, &codes, false, info, p, out);
+            let c = hierarchy(b, &codes, false, info, p, out, threads);
             core::mem::swap(&mut b.items64, &mut codes);
             c
         }
@@ -72,6 +72,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
 
 /// Clusters, top and bottoms over the sorted `codes`; `gathered`: `b.alt` already holds the
 /// references in that order (and `out` their primitive indices), else they are gathered here.
+/// `threads > 1` (`std`): SAH mini-trees side by side.
 fn hierarchy<K: Code>(
     b: &mut Builder,
     codes: &[Item<K>],
@@ -79,6 +80,7 @@ fn hierarchy<K: Code>(
     info: &PrepInfo,
     p: &BuildParams,
     out: &mut Bvh2,
+    threads: usize,
 ) -> Counters {
     let n = codes.len() as u32;
     if !gathered {
@@ -157,6 +159,8 @@ fn hierarchy<K: Code>(
         };
         let mut bins = Bins::new();
         let mut tasks = Vec::new();
+        // With threads: the mini-trees' tasks, built side by side at the end.
+        let mut par: Vec<topdown::Task> = Vec::new();
         let tstack = &mut b.ranges;
         tstack.clear();
         tstack.push([0, 1]);
@@ -171,7 +175,15 @@ fn hierarchy<K: Code>(
             let [lo, hi] = clusters[k as usize];
             let (bx, cb) = topdown::bounds_of(&b.alt[lo as usize..hi as usize]);
             let task = topdown::Task::new([i, lo, hi, depth], bx, cb);
-            topdown::subtree(&mut b.alt, &mut b.refs, &bp, out, task, &mut bins, &mut tasks, &mut c);
+            if threads > 1 {
+                par.push(task);
+            } else {
+                topdown::subtree(&mut b.alt, &mut b.refs, &bp, out, task, &mut bins, &mut tasks, &mut c);
+            }
+        }
+        #[cfg(feature = "std")]
+        if !par.is_empty() {
+            topdown::build_tasks_par(&mut b.alt, &mut b.refs, par, &bp, out, threads, &mut c, &mut b.par);
         }
         return c;
     }

@@ -331,6 +331,26 @@ impl Bvh2 {
         Builder::new().build(prims, params)
     }
 
+    /// [`build`](Self::build) on up to `threads` threads (`std`); see
+    /// [`Builder::build_into_par`] for what runs in parallel and what the result is.
+    ///
+    /// ```
+    /// use strahl::{build::{BuildParams, Bvh2}, scene};
+    /// let soup = scene::thin_soup(20_000, 3);
+    /// let (bvh, stats) = Bvh2::build_par(&soup[..], &BuildParams::balanced(), 2).unwrap();
+    /// assert_eq!(bvh.validate(&soup[..]).unwrap().leaves, stats.leaves);
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn build_par<P: Primitives + ?Sized>(
+        prims: &P,
+        params: &BuildParams,
+        threads: usize,
+    ) -> Result<(Bvh2, BuildStats), BuildError> {
+        let mut bvh = Bvh2::default();
+        let stats = Builder::new().build_into_par(prims, params, &mut bvh, threads)?;
+        Ok((bvh, stats))
+    }
+
     /// A borrowed view for the [`traverse`](crate::traverse) functions.
     #[inline]
     pub fn view(&self) -> Bvh2Ref<'_> {

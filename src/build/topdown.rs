@@ -18,6 +18,7 @@ use alloc::vec::Vec;
 
 /// A node still to build: its slot, the range of references it covers (valid in `alt` or `refs`),
 /// its depth (root = 1), its box and the bounds of its doubled centroids.
+#[derive(Clone, Debug)]
 pub(crate) struct Task {
     node: u32,
     begin: u32,
@@ -53,8 +54,16 @@ pub(crate) fn split_cost(p: &BuildParams, sum: f32, area: f32, count: u32) -> f3
 }
 
 /// Builds with the median or binned strategy.
-pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2) -> Counters {
+pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2, threads: usize) -> Counters {
+    #[cfg(feature = "std")]
+    let Builder { refs, alt, par, .. } = b;
+    #[cfg(not(feature = "std"))]
     let Builder { refs, alt, .. } = b;
+    #[cfg(feature = "std")]
+    if threads > 1 {
+        return build_refs_par(refs, alt, info, p, out, threads, par);
+    }
+    let _ = threads;
     build_refs(refs, alt, info, p, out)
 }
 
@@ -82,6 +91,257 @@ pub(crate) fn build_refs(
     let root = Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds);
     subtree(refs, alt, p, out, root, &mut bins, &mut stack, &mut c);
     c
+}
+
+/// [`build_refs`] on `threads` threads (`std`): the top of the tree is built on this thread
+/// down to tasks of at most `n / (8 threads)` references (at least [`PAR_GRAIN`]), which
+/// [`build_tasks_par`] then builds side by side. The tree has the sequential build's nodes, boxes
+/// and leaves; only the numbering of the nodes differs.
+#[cfg(feature = "std")]
+pub(crate) fn build_refs_par(
+    refs: &mut [PrimRef],
+    alt: &mut Vec<PrimRef>,
+    info: &PrepInfo,
+    p: &BuildParams,
+    out: &mut Bvh2,
+    threads: usize,
+    scratch: &mut Vec<ParScratch>,
+) -> Counters {
+    let n = refs.len();
+    if threads <= 1 {
+        return build_refs(refs, alt, info, p, out);
+    }
+    if alt.len() != n {
+        alt.resize(n, PrimRef(Default::default()));
+    }
+    out.prim_indices.resize(n, 0);
+    out.nodes.reserve((2 * n).saturating_sub(1));
+    out.nodes.push(info.bounds.to_node(0, 0));
+    let mut bins = Bins::new();
+    let mut c = Counters::default();
+    let mut stack: Vec<Task> = Vec::with_capacity(p.max_depth as usize + 1);
+    let mut tasks = Vec::new();
+    let grain = (n / (8 * threads)).max(PAR_GRAIN) as u32;
+    let root = Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds);
+    subtree_impl::<true>(
+        refs,
+        alt,
+        p,
+        out,
+        root,
+        &mut bins,
+        &mut stack,
+        &mut c,
+        Some((&mut tasks, grain)),
+        0,
+    );
+    build_tasks_par(refs, alt, tasks, p, out, threads, &mut c, scratch);
+    c
+}
+
+/// The parallel build does not cut the tree below this many references per task.
+#[cfg(feature = "std")]
+pub(crate) const PAR_GRAIN: usize = 4096;
+
+/// One worker's memory in a parallel build, kept by the [`Builder`] so that a rebuild touches no
+/// new pages: the subtrees it built, one after the other, and its task stack.
+#[cfg(feature = "std")]
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ParScratch {
+    out: Bvh2,
+    stack: Vec<Task>,
+}
+
+/// Where a job's subtree landed: its worker, its first node there (the task's own node) and
+/// how many, its first primitive slot there, and its counters.
+#[cfg(feature = "std")]
+struct Landed {
+    worker: usize,
+    node: usize,
+    nodes: usize,
+    slot: usize,
+    c: Counters,
+}
+
+/// Builds the subtrees of `tasks` (disjoint ranges, each valid in `refs` or `alt` as its
+/// `in_alt` says, each node already in `out`) on up to `threads` threads, largest first, each
+/// worker into its own arrays in `scratch`; then moves them into `out` in range order (on the
+/// same threads), so the result does not depend on which thread built what.
+#[cfg(feature = "std")]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn build_tasks_par(
+    refs: &mut [PrimRef],
+    alt: &mut [PrimRef],
+    mut tasks: Vec<Task>,
+    p: &BuildParams,
+    out: &mut Bvh2,
+    threads: usize,
+    c: &mut Counters,
+    scratch: &mut Vec<ParScratch>,
+) {
+    use core::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    tasks.sort_by_key(|t| t.begin);
+    let disjoint = tasks.windows(2).all(|w| w[0].end <= w[1].begin)
+        && tasks
+            .iter()
+            .all(|t| t.begin <= t.end && t.end as usize <= refs.len().min(alt.len()));
+    if !disjoint || threads <= 1 || tasks.len() <= 1 {
+        // One after the other on the whole buffers (a lone task gains nothing from a thread;
+        // tasks that were not disjoint ranges would be a bug of the caller).
+        let (mut bins, mut stack) = (Bins::new(), Vec::new());
+        for t in tasks {
+            subtree_impl::<true>(refs, alt, p, out, t, &mut bins, &mut stack, c, None, 0);
+        }
+        return;
+    }
+    // One job per task: the task rebased to its own slices of both buffers.
+    type Job<'a> = (Task, &'a mut [PrimRef], &'a mut [PrimRef]);
+    let mut jobs: Vec<Mutex<Option<Job<'_>>>> = Vec::with_capacity(tasks.len());
+    let (mut r, mut a) = (&mut refs[..], &mut alt[..]);
+    let mut at = 0usize;
+    for t in &tasks {
+        // Disjoint and in order (checked above): `at <= lo <= hi`, within what is left.
+        let (lo, hi) = (t.begin as usize, t.end as usize);
+        let (_, rest) = core::mem::take(&mut r).split_at_mut(lo - at);
+        let (mine, rest) = rest.split_at_mut(hi - lo);
+        r = rest;
+        let (_, arest) = core::mem::take(&mut a).split_at_mut(lo - at);
+        let (amine, arest) = arest.split_at_mut(hi - lo);
+        a = arest;
+        at = hi;
+        let local = Task {
+            node: 0,
+            begin: 0,
+            end: (hi - lo) as u32,
+            ..*t
+        };
+        jobs.push(Mutex::new(Some((local, mine, amine))));
+    }
+    let workers = threads.min(jobs.len());
+    if scratch.len() < workers {
+        scratch.resize_with(workers, ParScratch::default);
+    }
+    let mut order: Vec<usize> = (0..jobs.len()).collect();
+    order.sort_by_key(|&i| core::cmp::Reverse(tasks[i].end - tasks[i].begin));
+    let landed: Vec<Mutex<Option<Landed>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
+    let next = AtomicUsize::new(0);
+    std::thread::scope(|s| {
+        for (w, ws) in scratch[..workers].iter_mut().enumerate() {
+            let (jobs, order, landed, next) = (&jobs, &order, &landed, &next);
+            s.spawn(move || {
+                let mut bins = Bins::new();
+                ws.out.nodes.clear();
+                ws.out.prim_indices.clear();
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&j) = order.get(i) else { break };
+                    let Some((mut t, r, a)) = jobs[j].lock().ok().and_then(|mut g| g.take()) else {
+                        continue;
+                    };
+                    let (node, slot) = (ws.out.nodes.len(), ws.out.prim_indices.len());
+                    t.node = node as u32;
+                    ws.out.nodes.push(t.bounds.to_node(0, 0));
+                    ws.out.prim_indices.resize(slot + t.end as usize, 0);
+                    let mut lc = Counters::default();
+                    subtree_impl::<true>(
+                        r,
+                        a,
+                        p,
+                        &mut ws.out,
+                        t,
+                        &mut bins,
+                        &mut ws.stack,
+                        &mut lc,
+                        None,
+                        slot as u32,
+                    );
+                    let nodes = ws.out.nodes.len() - node;
+                    if let Ok(mut g) = landed[j].lock() {
+                        *g = Some(Landed {
+                            worker: w,
+                            node,
+                            nodes,
+                            slot,
+                            c: lc,
+                        });
+                    }
+                }
+            });
+        }
+    });
+    let landed: Vec<Landed> = landed
+        .into_iter()
+        .filter_map(|m| m.into_inner().ok().flatten())
+        .collect();
+    if landed.len() != tasks.len() {
+        // NOTE: unreachable (every job is taken once and lands); a worker that panicked has
+        // already ended the scope with its panic.
+        return;
+    }
+    // In range order, subtree k's nodes other than its own go to `base[k]..`; its own node to
+    // the task's slot in the top.
+    let mut base = Vec::with_capacity(tasks.len());
+    let mut end = out.nodes.len();
+    for l in &landed {
+        base.push(end);
+        end += l.nodes - 1;
+    }
+    out.nodes.resize(end, out.nodes[0]);
+    let relocate = |l: &Landed, b: usize, t: &Task, mut nd: crate::traverse::Node| {
+        if nd.count == 0 {
+            nd.index = (b + nd.index as usize - l.node - 1) as u32;
+        } else {
+            nd.index = (nd.index as usize - l.slot) as u32 + t.begin;
+        }
+        nd
+    };
+    for ((t, l), &b) in tasks.iter().zip(&landed).zip(&base) {
+        let w = &scratch[l.worker].out;
+        out.nodes[t.node as usize] = relocate(l, b, t, w.nodes[l.node]);
+        c.leaves += l.c.leaves;
+        c.max_depth = c.max_depth.max(l.c.max_depth);
+        c.forced_splits += l.c.forced_splits;
+    }
+    // The moves, side by side: each subtree's slices of `out` are disjoint.
+    type Move<'a> = (&'a mut [crate::traverse::Node], &'a mut [u32], usize);
+    let mut moves: Vec<Mutex<Option<Move<'_>>>> = Vec::with_capacity(tasks.len());
+    let (mut nodes, mut prims) = (
+        &mut out.nodes[base.first().copied().unwrap_or(0)..],
+        &mut out.prim_indices[..],
+    );
+    let mut pat = 0usize;
+    for (k, (t, l)) in tasks.iter().zip(&landed).enumerate() {
+        let (mine, rest) = core::mem::take(&mut nodes).split_at_mut(l.nodes - 1);
+        nodes = rest;
+        let (_, prest) = core::mem::take(&mut prims).split_at_mut(t.begin as usize - pat);
+        let (pmine, prest) = prest.split_at_mut((t.end - t.begin) as usize);
+        prims = prest;
+        pat = t.end as usize;
+        moves.push(Mutex::new(Some((mine, pmine, k))));
+    }
+    let next = AtomicUsize::new(0);
+    let scratch = &*scratch;
+    std::thread::scope(|s| {
+        for _ in 0..workers {
+            let (moves, order, next, tasks, landed, base) = (&moves, &order, &next, &tasks, &landed, &base);
+            s.spawn(move || {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&j) = order.get(i) else { break };
+                    let Some((dst, pdst, k)) = moves[j].lock().ok().and_then(|mut g| g.take()) else {
+                        continue;
+                    };
+                    let (t, l) = (&tasks[k], &landed[k]);
+                    let w = &scratch[l.worker].out;
+                    for (d, &nd) in dst.iter_mut().zip(&w.nodes[l.node + 1..l.node + l.nodes]) {
+                        *d = relocate(l, base[k], t, nd);
+                    }
+                    pdst.copy_from_slice(&w.prim_indices[l.slot..l.slot + pdst.len()]);
+                }
+            });
+        }
+    });
 }
 
 impl Task {
@@ -132,12 +392,38 @@ pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
     stack: &mut Vec<Task>,
     c: &mut Counters,
 ) {
+    subtree_impl::<LOCAL_SMALL>(refs, alt, p, out, root, bins, stack, c, None, 0);
+}
+
+/// [`subtree_with`]; with `defer = Some((tasks, grain))`, a task of at most `grain` references
+/// is not built but pushed to `tasks` (its node is in `out`, still a placeholder): the sequential
+/// top of the parallel build. Leaves take the slots `off` after their range (0 but in the
+/// parallel build's workers).
+#[allow(clippy::too_many_arguments)]
+fn subtree_impl<const LOCAL_SMALL: bool>(
+    refs: &mut [PrimRef],
+    alt: &mut [PrimRef],
+    p: &BuildParams,
+    out: &mut Bvh2,
+    root: Task,
+    bins: &mut Bins,
+    stack: &mut Vec<Task>,
+    c: &mut Counters,
+    mut defer: Option<(&mut Vec<Task>, u32)>,
+    off: u32,
+) {
     let bins = &mut *bins;
     let c = &mut *c;
     stack.clear();
     // The left child is built next, without a trip through the stack.
     let mut next = Some(root);
     while let Some(t) = next.take().or_else(|| stack.pop()) {
+        if let Some((tasks, grain)) = defer.as_mut()
+            && t.end - t.begin <= *grain
+        {
+            tasks.push(t);
+            continue;
+        }
         c.max_depth = c.max_depth.max(t.depth);
         let count = t.end - t.begin;
         let range = t.begin as usize..t.end as usize;
@@ -147,7 +433,7 @@ pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
             (&mut refs[range.clone()], &mut alt[range.clone()])
         };
         if count <= p.min_leaf_size {
-            make_leaf(out, c, &t, src);
+            make_leaf(out, c, &t, src, off);
             continue;
         }
         let area = t.bounds.half_area_nonempty();
@@ -161,7 +447,7 @@ pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
             {
                 // The whole subtree in local arrays (the same splits as the branch below).
                 let all = p.bin_axes == BinAxes::All;
-                small::subtree(src, t.begin, [t.node, t.depth], t.bounds, t.cb, all, p, out, c);
+                small::subtree(src, t.begin + off, [t.node, t.depth], t.bounds, t.cb, all, p, out, c);
                 continue;
             }
             Strategy::BinnedSah if count as usize <= binned::SMALL => {
@@ -226,12 +512,12 @@ pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
         let split = match found {
             // A split that does not pay.
             Some(None) => {
-                make_leaf(out, c, &t, src);
+                make_leaf(out, c, &t, src, off);
                 continue;
             }
             Some(Some(s)) => s,
             None if may_leaf => {
-                make_leaf(out, c, &t, src);
+                make_leaf(out, c, &t, src, off);
                 continue;
             }
             None => {
@@ -281,10 +567,12 @@ pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
     }
 }
 
-/// Makes `t` a leaf over `refs` (its range, in the buffer that holds it).
-fn make_leaf(out: &mut Bvh2, c: &mut Counters, t: &Task, refs: &[PrimRef]) {
-    out.nodes[t.node as usize] = t.bounds.to_node(t.begin, t.end - t.begin);
-    let slots = &mut out.prim_indices[t.begin as usize..t.end as usize];
+/// Makes `t` a leaf over `refs` (its range, in the buffer that holds it), its slots `off` after
+/// its range's start.
+fn make_leaf(out: &mut Bvh2, c: &mut Counters, t: &Task, refs: &[PrimRef], off: u32) {
+    let (begin, end) = (t.begin + off, t.end + off);
+    out.nodes[t.node as usize] = t.bounds.to_node(begin, end - begin);
+    let slots = &mut out.prim_indices[begin as usize..end as usize];
     for (s, r) in slots.iter_mut().zip(refs) {
         *s = r.index();
     }

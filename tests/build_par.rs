@@ -1,0 +1,168 @@
+//! The parallel builds (`Builder::build_into_par`, `Bvh2::build_par`): on every scene, thread
+//! count and parallel strategy, the tree is the single-threaded build's (the same nodes, boxes and
+//! leaves, walked from the root; the same statistics and SAH cost), `validate()` passes, and two
+//! runs with the same thread count make the same bytes.
+
+use strahl::build::{BuildParams, BuildStats, Builder, Bvh2};
+use strahl::geometry::Triangle;
+use strahl::scene::{self, Rng};
+use strahl::traverse::{self, Moller};
+use strahl::{Ray, Vec3};
+
+/// The strategies that build in parallel, and one with a low depth bound.
+fn params() -> Vec<(&'static str, BuildParams)> {
+    vec![
+        ("fast", BuildParams::fast()),
+        ("balanced", BuildParams::balanced()),
+        ("median", BuildParams::median()),
+        ("hybrid_sah", BuildParams::hybrid_sah()),
+        (
+            "fast_depth34",
+            BuildParams {
+                max_depth: 34,
+                ..BuildParams::fast()
+            },
+        ),
+    ]
+}
+
+/// `Ok` if `a` and `b` are the same tree walked from the root: the same boxes, the same
+/// interior/leaf shape and the same primitive indices in every leaf, in order.
+fn same_tree(a: &Bvh2, b: &Bvh2) -> Result<(), String> {
+    if a.nodes.len() != b.nodes.len() || a.prim_indices.len() != b.prim_indices.len() {
+        return Err(format!(
+            "sizes: {} / {} nodes, {} / {} indices",
+            a.nodes.len(),
+            b.nodes.len(),
+            a.prim_indices.len(),
+            b.prim_indices.len()
+        ));
+    }
+    if a.nodes.is_empty() {
+        return Ok(());
+    }
+    let mut stack = vec![(0usize, 0usize)];
+    let mut seen = 0usize;
+    while let Some((i, j)) = stack.pop() {
+        seen += 1;
+        let (x, y) = (a.nodes[i], b.nodes[j]);
+        if x.min != y.min || x.max != y.max || x.count != y.count {
+            return Err(format!("node {i} / {j}: {x:?} against {y:?}"));
+        }
+        if x.count == 0 {
+            let (l, m) = (x.index as usize, y.index as usize);
+            stack.push((l, m));
+            stack.push((l + 1, m + 1));
+        } else {
+            let (s, t) = (x.index as usize, y.index as usize);
+            let n = x.count as usize;
+            if a.prim_indices[s..s + n] != b.prim_indices[t..t + n] {
+                return Err(format!("leaf {i} / {j}: other primitives"));
+            }
+        }
+    }
+    if seen != a.nodes.len() {
+        return Err(format!("{seen} nodes reached of {}", a.nodes.len()));
+    }
+    Ok(())
+}
+
+fn stats_key(s: &BuildStats) -> [u32; 6] {
+    [s.primitives, s.invalid, s.nodes, s.leaves, s.max_depth, s.forced_splits]
+}
+
+/// Every parallel strategy and thread count against the single-threaded build of `tris`.
+fn check(scene: &str, tris: &[Triangle]) {
+    let mut builder = Builder::new();
+    for (name, p) in params() {
+        let (seq, seq_stats) = builder.build(tris, &p).unwrap();
+        let seq_sah = seq.sah_cost(1.0, 1.0);
+        for threads in [1, 2, 3, 8] {
+            let mut par = Bvh2::default();
+            let stats = builder.build_into_par(tris, &p, &mut par, threads).unwrap();
+            let what = format!("{scene} / {name} / {threads} threads");
+            par.validate(tris).unwrap_or_else(|e| panic!("{what}: {e:?}"));
+            assert_eq!(stats_key(&stats), stats_key(&seq_stats), "{what}");
+            same_tree(&seq, &par).unwrap_or_else(|e| panic!("{what}: {e}"));
+            assert_eq!(par.sah_cost(1.0, 1.0), seq_sah, "{what}");
+            assert!(stats.max_depth <= p.max_depth, "{what}");
+            // The same bytes again (fresh output, same builder).
+            let (again, _) = Bvh2::build_par(tris, &p, threads).unwrap();
+            assert!(
+                again.nodes == par.nodes && again.prim_indices == par.prim_indices,
+                "{what}: not reproducible"
+            );
+        }
+    }
+}
+
+#[test]
+fn random_and_clustered_soups() {
+    check("thin_soup", &scene::thin_soup(40_000, 7));
+    check("clustered", &scene::clustered_soup(30_000, 12, 3));
+}
+
+#[test]
+fn adversarial_scenes() {
+    // 70,000 copies of one triangle: every centroid coincides (forced middle splits).
+    let t = [
+        Vec3::new(0.0, 0.0, 1.0),
+        Vec3::new(1.0, 0.0, 1.0),
+        Vec3::new(0.0, 1.0, 1.0),
+    ];
+    check("same_triangle", &vec![t; 70_000]);
+    // NaN and infinite vertices among valid triangles (excluded, counted), and a far outlier.
+    let mut r = Rng::new(4);
+    let mut tris: Vec<Triangle> = (0..30_000)
+        .map(|i| {
+            let p = Vec3::new(r.f32(), r.f32(), r.f32());
+            let q = match i % 997 {
+                0 => Vec3::NAN,
+                1 => Vec3::INFINITY,
+                _ => p + r.unit_vector() * 0.01,
+            };
+            [p, q, p + r.unit_vector() * 0.01]
+        })
+        .collect();
+    tris.push([Vec3::splat(1e7), Vec3::splat(1e7) + Vec3::X, Vec3::splat(1e7) + Vec3::Y]);
+    check("nan_inf_outlier", &tris);
+    // A geometric series (nested boxes: a chain without the depth bound) beside a random soup.
+    let mut tris = scene::thin_soup(20_000, 9);
+    tris.extend((0..200).map(|i| {
+        let x = 2f32.powf(-(i as f32));
+        [Vec3::new(x, 0.0, 0.0), Vec3::new(x, x, 0.0), Vec3::new(x, 0.0, x)]
+    }));
+    check("geometric_beside_soup", &tris);
+}
+
+#[test]
+fn small_inputs_take_the_single_threaded_path() {
+    let mut builder = Builder::new();
+    for n in [0usize, 1, 2, 100, 8192] {
+        let tris = scene::thin_soup(n, 2);
+        for (name, p) in params() {
+            let (seq, s) = builder.build(&tris[..], &p).unwrap();
+            let mut par = Bvh2::default();
+            let t = builder.build_into_par(&tris[..], &p, &mut par, 4).unwrap();
+            assert!(
+                par.nodes == seq.nodes && par.prim_indices == seq.prim_indices,
+                "{n} / {name}"
+            );
+            assert_eq!(stats_key(&s), stats_key(&t));
+        }
+    }
+}
+
+#[test]
+fn parallel_tree_gives_brute_force_hits() {
+    let tris = scene::thin_soup(20_000, 5);
+    let (bvh, _) = Bvh2::build_par(&tris[..], &BuildParams::fast(), 3).unwrap();
+    let mut r = Rng::new(8);
+    for _ in 0..300 {
+        let o = Vec3::new(r.f32(), r.f32(), r.f32()) * 1.4 - Vec3::splat(0.2);
+        let ray = Ray::new(o, r.unit_vector());
+        let got = traverse::intersect_scalar::<Moller, _>(bvh.view(), &tris[..], &ray);
+        let want = traverse::intersect_brute_force::<Moller, _>(&tris[..], &ray);
+        assert_eq!(got.map(|h| h.t), want.map(|h| h.t), "{ray:?}");
+    }
+}
