@@ -183,7 +183,17 @@ fn hierarchy<K: Code>(
         }
         #[cfg(feature = "std")]
         if !par.is_empty() {
-            topdown::build_tasks_par(&mut b.alt, &mut b.refs, par, &bp, out, threads, &mut c, &mut b.par);
+            topdown::build_tasks_par(
+                &mut b.alt,
+                &mut b.refs,
+                par,
+                &bp,
+                out,
+                threads,
+                &mut c,
+                &mut b.par,
+                false,
+            );
         }
         return c;
     }

@@ -93,10 +93,11 @@ pub(crate) fn build_refs(
     c
 }
 
-/// [`build_refs`] on `threads` threads (`std`): the top of the tree is built on this thread
-/// down to tasks of at most `n / (8 threads)` references (at least [`PAR_GRAIN`]), which
-/// [`build_tasks_par`] then builds side by side. The tree has the sequential build's nodes, boxes
-/// and leaves; only the numbering of the nodes differs.
+/// [`build_refs`] on `threads` threads (`std`). In rounds, every task of more than
+/// `n / (8 threads)` references (at least [`PAR_GRAIN`]) is split once, the tasks of a round side
+/// by side (the root alone in the first); then [`build_tasks_par`] builds the remaining tasks'
+/// subtrees side by side. The tree has the sequential build's nodes, boxes and leaves; only the
+/// numbering of the nodes differs.
 #[cfg(feature = "std")]
 pub(crate) fn build_refs_par(
     refs: &mut [PrimRef],
@@ -117,26 +118,18 @@ pub(crate) fn build_refs_par(
     out.prim_indices.resize(n, 0);
     out.nodes.reserve((2 * n).saturating_sub(1));
     out.nodes.push(info.bounds.to_node(0, 0));
-    let mut bins = Bins::new();
     let mut c = Counters::default();
-    let mut stack: Vec<Task> = Vec::with_capacity(p.max_depth as usize + 1);
-    let mut tasks = Vec::new();
     let grain = (n / (8 * threads)).max(PAR_GRAIN) as u32;
-    let root = Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds);
-    subtree_impl::<true>(
-        refs,
-        alt,
-        p,
-        out,
-        root,
-        &mut bins,
-        &mut stack,
-        &mut c,
-        Some((&mut tasks, grain)),
-        0,
-    );
-    build_tasks_par(refs, alt, tasks, p, out, threads, &mut c, scratch);
-    c
+    let mut tasks = alloc::vec![Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds)];
+    loop {
+        let (big, done): (Vec<Task>, Vec<Task>) = tasks.into_iter().partition(|t| t.end - t.begin > grain);
+        if big.is_empty() {
+            build_tasks_par(refs, alt, done, p, out, threads, &mut c, scratch, false);
+            return c;
+        }
+        tasks = build_tasks_par(refs, alt, big, p, out, threads, &mut c, scratch, true);
+        tasks.extend(done);
+    }
 }
 
 /// The parallel build does not cut the tree below this many references per task.
@@ -144,29 +137,34 @@ pub(crate) fn build_refs_par(
 pub(crate) const PAR_GRAIN: usize = 4096;
 
 /// One worker's memory in a parallel build, kept by the [`Builder`] so that a rebuild touches no
-/// new pages: the subtrees it built, one after the other, and its task stack.
+/// new pages: the subtrees it built, one after the other, its task stack and the tasks it left
+/// (splitting once).
 #[cfg(feature = "std")]
 #[derive(Clone, Debug, Default)]
 pub(crate) struct ParScratch {
     out: Bvh2,
     stack: Vec<Task>,
+    left: Vec<Task>,
 }
 
 /// Where a job's subtree landed: its worker, its first node there (the task's own node) and
-/// how many, its first primitive slot there, and its counters.
+/// how many, its first primitive slot there, the tasks it left (a range of the worker's `left`),
+/// and its counters.
 #[cfg(feature = "std")]
 struct Landed {
     worker: usize,
     node: usize,
     nodes: usize,
     slot: usize,
+    left: core::ops::Range<usize>,
     c: Counters,
 }
 
 /// Builds the subtrees of `tasks` (disjoint ranges, each valid in `refs` or `alt` as its
 /// `in_alt` says, each node already in `out`) on up to `threads` threads, largest first, each
 /// worker into its own arrays in `scratch`; then moves them into `out` in range order (on the
-/// same threads), so the result does not depend on which thread built what.
+/// same threads), so the result does not depend on which thread built what. `split_once`: each
+/// task is only split (or made a leaf), and its children are returned as tasks, in range order.
 #[cfg(feature = "std")]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn build_tasks_par(
@@ -178,7 +176,8 @@ pub(crate) fn build_tasks_par(
     threads: usize,
     c: &mut Counters,
     scratch: &mut Vec<ParScratch>,
-) {
+    split_once: bool,
+) -> Vec<Task> {
     use core::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
     tasks.sort_by_key(|t| t.begin);
@@ -186,14 +185,17 @@ pub(crate) fn build_tasks_par(
         && tasks
             .iter()
             .all(|t| t.begin <= t.end && t.end as usize <= refs.len().min(alt.len()));
+    let mut left = Vec::new();
     if !disjoint || threads <= 1 || tasks.len() <= 1 {
         // One after the other on the whole buffers (a lone task gains nothing from a thread;
         // tasks that were not disjoint ranges would be a bug of the caller).
         let (mut bins, mut stack) = (Bins::new(), Vec::new());
         for t in tasks {
-            subtree_impl::<true>(refs, alt, p, out, t, &mut bins, &mut stack, c, None, 0);
+            let defer = split_once.then(|| (&mut left, (t.end - t.begin).saturating_sub(1)));
+            subtree_impl::<true>(refs, alt, p, out, t, &mut bins, &mut stack, c, defer, 0);
         }
-        return;
+        left.sort_by_key(|t| t.begin);
+        return left;
     }
     // One job per task: the task rebased to its own slices of both buffers.
     type Job<'a> = (Task, &'a mut [PrimRef], &'a mut [PrimRef]);
@@ -233,6 +235,7 @@ pub(crate) fn build_tasks_par(
                 let mut bins = Bins::new();
                 ws.out.nodes.clear();
                 ws.out.prim_indices.clear();
+                ws.left.clear();
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&j) = order.get(i) else { break };
@@ -244,18 +247,10 @@ pub(crate) fn build_tasks_par(
                     ws.out.nodes.push(t.bounds.to_node(0, 0));
                     ws.out.prim_indices.resize(slot + t.end as usize, 0);
                     let mut lc = Counters::default();
-                    subtree_impl::<true>(
-                        r,
-                        a,
-                        p,
-                        &mut ws.out,
-                        t,
-                        &mut bins,
-                        &mut ws.stack,
-                        &mut lc,
-                        None,
-                        slot as u32,
-                    );
+                    let first_left = ws.left.len();
+                    let defer = split_once.then(|| (&mut ws.left, t.end.saturating_sub(1)));
+                    let (wout, wstack) = (&mut ws.out, &mut ws.stack);
+                    subtree_impl::<true>(r, a, p, wout, t, &mut bins, wstack, &mut lc, defer, slot as u32);
                     let nodes = ws.out.nodes.len() - node;
                     if let Ok(mut g) = landed[j].lock() {
                         *g = Some(Landed {
@@ -263,6 +258,7 @@ pub(crate) fn build_tasks_par(
                             node,
                             nodes,
                             slot,
+                            left: first_left..ws.left.len(),
                             c: lc,
                         });
                     }
@@ -277,7 +273,7 @@ pub(crate) fn build_tasks_par(
     if landed.len() != tasks.len() {
         // NOTE: unreachable (every job is taken once and lands); a worker that panicked has
         // already ended the scope with its panic.
-        return;
+        return left;
     }
     // In range order, subtree k's nodes other than its own go to `base[k]..`; its own node to
     // the task's slot in the top.
@@ -288,20 +284,29 @@ pub(crate) fn build_tasks_par(
         end += l.nodes - 1;
     }
     out.nodes.resize(end, out.nodes[0]);
+    // NOTE: wrapping: a node left to a later round is still a placeholder (index 0, count 0);
+    // its slot is written again when that round builds it.
+    let at = |l: &Landed, b: usize, i: u32| (b + i as usize).wrapping_sub(l.node + 1) as u32;
     let relocate = |l: &Landed, b: usize, t: &Task, mut nd: crate::traverse::Node| {
         if nd.count == 0 {
-            nd.index = (b + nd.index as usize - l.node - 1) as u32;
+            nd.index = at(l, b, nd.index);
         } else {
             nd.index = (nd.index as usize - l.slot) as u32 + t.begin;
         }
         nd
     };
     for ((t, l), &b) in tasks.iter().zip(&landed).zip(&base) {
-        let w = &scratch[l.worker].out;
-        out.nodes[t.node as usize] = relocate(l, b, t, w.nodes[l.node]);
+        let w = &scratch[l.worker];
+        out.nodes[t.node as usize] = relocate(l, b, t, w.out.nodes[l.node]);
         c.leaves += l.c.leaves;
         c.max_depth = c.max_depth.max(l.c.max_depth);
         c.forced_splits += l.c.forced_splits;
+        left.extend(w.left[l.left.clone()].iter().map(|d| Task {
+            node: at(l, b, d.node),
+            begin: d.begin + t.begin,
+            end: d.end + t.begin,
+            ..d.clone()
+        }));
     }
     // The moves, side by side: each subtree's slices of `out` are disjoint.
     type Move<'a> = (&'a mut [crate::traverse::Node], &'a mut [u32], usize);
@@ -342,6 +347,7 @@ pub(crate) fn build_tasks_par(
             });
         }
     });
+    left
 }
 
 impl Task {
