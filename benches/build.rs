@@ -1,10 +1,12 @@
 //! BVH2 construction: every builder side by side, strahl's and its peers', one criterion group per
-//! scene, single thread.
+//! scene, single thread; then `build_threads/soup1M`, the parallel builds on 1 thread and on every
+//! core.
 //!
 //! ```text
 //! cargo bench --bench build -- --noplot                       # bunny and the 1M-triangle soup
 //! cargo bench --features embree --bench build -- --noplot     # + Embree 3's rtcBuildBVH
 //! STRAHL_BENCH_SCENES=all cargo bench --bench build -- --noplot   # + 1M terrain, 1M sphereflake
+//! cargo bench --bench build -- --noplot build_threads         # the parallel builds only
 //! ```
 //!
 //! Criterion reports build throughput as `thrpt` in elements (triangles) per second, for *warm*
@@ -919,5 +921,47 @@ fn build(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, build);
+/// `build_threads/soup1M`: the parallel builds (`Builder::build_into_par`, warm) of the builders
+/// that have one, on 1 thread and on every core (`available_parallelism`), side by side; each
+/// parallel tree is checked to have the single-threaded tree's SAH cost.
+fn build_threads(c: &mut Criterion) {
+    let tris = scene::thin_soup(1 << 20, 1);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut g = c.benchmark_group("build_threads/soup1M");
+    g.throughput(Throughput::Elements(tris.len() as u64));
+    g.sample_size(10);
+    g.sampling_mode(SamplingMode::Flat);
+    g.warm_up_time(Duration::from_millis(500));
+    g.measurement_time(Duration::from_secs(4));
+    let presets = [
+        ("fast", BuildParams::fast()),
+        ("balanced", BuildParams::balanced()),
+        ("hybrid_sah", BuildParams::hybrid_sah()),
+        ("median", BuildParams::median()),
+    ];
+    for (name, p) in presets {
+        let mut builder = Builder::new();
+        let (mut one, mut many) = (Bvh2::default(), Bvh2::default());
+        builder.build_into(&tris[..], &p, &mut one).expect("valid params");
+        builder
+            .build_into_par(&tris[..], &p, &mut many, cores)
+            .expect("valid params");
+        assert_eq!(
+            one.sah_cost(1.0, 1.0),
+            many.sah_cost(1.0, 1.0),
+            "{name}: parallel tree differs"
+        );
+        for threads in [1, cores] {
+            g.bench_function(format!("{name}/{threads}"), |b| {
+                b.iter(|| builder.build_into_par(black_box(&tris[..]), &p, &mut many, threads))
+            });
+            if cores == 1 {
+                break;
+            }
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, build, build_threads);
 criterion_main!(benches);
