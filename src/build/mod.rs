@@ -6,7 +6,10 @@
 //! [`traverse`](crate::traverse). Input: anything that implements [`Primitives`] (every
 //! [`Triangles`] storage, or a slice of [`Aabb`]) and a
 //! [`BuildParams`]. Output: a [`Bvh2`] (32-byte [`Node`]s, siblings adjacent, one primitive-index
-//! array) and [`BuildStats`]. Needs the `alloc` feature; single-threaded.
+//! array) and [`BuildStats`]. Needs the `alloc` feature; single-threaded, but for
+//! [`Builder::build_into_par`] and [`Bvh2::build_par`] (`std`), which build the median, binned-SAH
+//! and [`HlbvhSah`](Strategy::HlbvhSah) trees on several threads: the same tree, numbered
+//! differently.
 //!
 //! # Builders
 //! | [`Strategy`] | paper | per node | total |
