@@ -3,7 +3,7 @@
 //! leaves, walked from the root; the same statistics and SAH cost), `validate()` passes, and two
 //! runs with the same thread count make the same bytes.
 
-use strahl::build::{BuildParams, BuildStats, Builder, Bvh2};
+use strahl::build::{BuildParams, BuildStats, Builder, Bvh2, MortonBits, Refine, Strategy, TreeletParams};
 use strahl::geometry::Triangle;
 use strahl::scene::{self, Rng};
 use strahl::traverse::{self, Moller};
@@ -73,11 +73,24 @@ fn stats_key(s: &BuildStats) -> [u32; 6] {
 
 /// Every parallel strategy and thread count against the single-threaded build of `tris`.
 fn check(scene: &str, tris: &[Triangle]) {
+    check_with(scene, tris, &params(), &[1, 2, 3, 8], true);
+}
+
+/// [`check`] with other parameters and thread counts; `reordered`: the parallel trees must be
+/// numbered differently (the parallel path ran; a tree whose top is split in a single round is
+/// numbered the same either way).
+fn check_with(
+    scene: &str,
+    tris: &[Triangle],
+    params: &[(&str, BuildParams)],
+    thread_counts: &[usize],
+    reordered: bool,
+) {
     let mut builder = Builder::new();
-    for (name, p) in params() {
+    for &(name, p) in params {
         let (seq, seq_stats) = builder.build(tris, &p).unwrap();
         let seq_sah = seq.sah_cost(1.0, 1.0);
-        for threads in [1, 2, 3, 8] {
+        for &threads in thread_counts {
             let mut par = Bvh2::default();
             let stats = builder.build_into_par(tris, &p, &mut par, threads).unwrap();
             let what = format!("{scene} / {name} / {threads} threads");
@@ -86,6 +99,10 @@ fn check(scene: &str, tris: &[Triangle]) {
             same_tree(&seq, &par).unwrap_or_else(|e| panic!("{what}: {e}"));
             assert_eq!(par.sah_cost(1.0, 1.0), seq_sah, "{what}");
             assert!(stats.max_depth <= p.max_depth, "{what}");
+            if threads > 1 && reordered {
+                // The parallel path ran: its nodes are numbered differently.
+                assert_ne!(par.nodes, seq.nodes, "{what}: built on one thread?");
+            }
             // The same bytes again (fresh output, same builder).
             let (again, _) = Bvh2::build_par(tris, &p, threads).unwrap();
             assert!(
@@ -165,4 +182,61 @@ fn parallel_tree_gives_brute_force_hits() {
         let want = traverse::intersect_brute_force::<Moller, _>(&tris[..], &ray);
         assert_eq!(got.map(|h| h.t), want.map(|h| h.t), "{ray:?}");
     }
+}
+
+/// Leaves larger than the parallel build's grain (big tasks become leaves in the split rounds),
+/// refinement passes after a parallel build, HLBVH-SAH variants, and unusual thread counts.
+#[test]
+fn other_parameters_and_thread_counts() {
+    let tris = scene::thin_soup(30_000, 11);
+    let fast = BuildParams::fast();
+    let mut list = Vec::new();
+    for (min, max) in [(1, 4097), (1, 20_000), (4097, 5000), (1, 65_536)] {
+        list.push((
+            "leaf sizes",
+            BuildParams {
+                min_leaf_size: min,
+                max_leaf_size: max,
+                // Leaves are cheap: big ones pay.
+                intersection_cost: 1e-6,
+                ..fast
+            },
+        ));
+    }
+    list.push((
+        "rotations",
+        BuildParams {
+            refine: Refine::Rotations(2),
+            ..fast
+        },
+    ));
+    list.push((
+        "treelets",
+        BuildParams {
+            refine: Refine::Treelets(TreeletParams::new()),
+            ..BuildParams::hybrid_sah()
+        },
+    ));
+    for (bits, cluster) in [
+        (MortonBits::Bits63, 1),
+        (MortonBits::Bits30, 5000),
+        (MortonBits::Bits63, 65_536),
+    ] {
+        list.push((
+            "hlbvh_sah",
+            BuildParams {
+                strategy: Strategy::HlbvhSah,
+                morton_bits: bits,
+                cluster_size: cluster,
+                ..BuildParams::hybrid_sah()
+            },
+        ));
+    }
+    for (name, p) in &list {
+        assert!(p.check().is_ok(), "{name}: {p:?}");
+    }
+    check_with("soup30k", &tris, &list, &[2, 17], false);
+    // Just above the single-threaded limit, and far more threads than work (or than exist).
+    let tris = scene::thin_soup(8193, 4);
+    check_with("soup8193", &tris, &params(), &[2, 64, 200, usize::MAX], false);
 }

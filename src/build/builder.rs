@@ -74,6 +74,9 @@ pub struct Builder {
 /// Builds of at most this many (valid) primitives run on the calling thread.
 const PAR_MIN: usize = 8192;
 
+/// The most threads a parallel build ([`Builder::build_into_par`]) starts.
+pub const MAX_THREADS: usize = 256;
+
 /// What a builder reports besides the tree.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Counters {
@@ -116,10 +119,11 @@ impl Builder {
     /// the same bytes.
     ///
     /// Parallel: the median and binned SAH builders ([`Strategy::Median`],
-    /// [`Strategy::BinnedSah`]: the top of the tree on the calling thread, then its subtrees side
-    /// by side) and the HLBVH with SAH mini-trees ([`Strategy::HlbvhSah`]: the mini-trees side by
-    /// side). The other strategies, and a refinement pass, run on the calling thread. Below
-    /// 8,192 primitives the build is single-threaded.
+    /// [`Strategy::BinnedSah`]: the top of the tree in rounds, each splitting every large task
+    /// once, the round's tasks side by side; then the remaining subtrees side by side) and the
+    /// HLBVH with SAH mini-trees ([`Strategy::HlbvhSah`]: the mini-trees side by side). The other
+    /// strategies, and a refinement pass, run on the calling thread. Below 8,192 primitives the
+    /// build is single-threaded; `threads` is taken as at least 1 and at most [`MAX_THREADS`].
     ///
     /// ```
     /// use strahl::{build::{Builder, BuildParams, Bvh2}, scene};
@@ -139,7 +143,7 @@ impl Builder {
         out: &mut Bvh2,
         threads: usize,
     ) -> Result<BuildStats, BuildError> {
-        self.build_into_with(prims, params, out, threads.max(1))
+        self.build_into_with(prims, params, out, threads.clamp(1, MAX_THREADS))
     }
 
     fn build_into_with<P: Primitives + ?Sized>(

@@ -119,7 +119,7 @@ pub(crate) fn build_refs_par(
     out.nodes.reserve((2 * n).saturating_sub(1));
     out.nodes.push(info.bounds.to_node(0, 0));
     let mut c = Counters::default();
-    let grain = (n / (8 * threads)).max(PAR_GRAIN) as u32;
+    let grain = (n / threads.saturating_mul(8)).max(PAR_GRAIN) as u32;
     let mut tasks = alloc::vec![Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds)];
     loop {
         let (big, done): (Vec<Task>, Vec<Task>) = tasks.into_iter().partition(|t| t.end - t.begin > grain);
@@ -342,7 +342,11 @@ pub(crate) fn build_tasks_par(
                     for (d, &nd) in dst.iter_mut().zip(&w.nodes[l.node + 1..l.node + l.nodes]) {
                         *d = relocate(l, base[k], t, nd);
                     }
-                    pdst.copy_from_slice(&w.prim_indices[l.slot..l.slot + pdst.len()]);
+                    // Only leaves write slots (a split-once job that made none leaves its range
+                    // to a later round).
+                    if l.c.leaves > 0 {
+                        pdst.copy_from_slice(&w.prim_indices[l.slot..l.slot + pdst.len()]);
+                    }
                 }
             });
         }
@@ -402,8 +406,8 @@ pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
 }
 
 /// [`subtree_with`]; with `defer = Some((tasks, grain))`, a task of at most `grain` references
-/// is not built but pushed to `tasks` (its node is in `out`, still a placeholder): the sequential
-/// top of the parallel build. Leaves take the slots `off` after their range (0 but in the
+/// is not built but pushed to `tasks` (its node is in `out`, still a placeholder): the rounds of
+/// the parallel build, which split each task once. Leaves take the slots `off` after their range (0 but in the
 /// parallel build's workers).
 #[allow(clippy::too_many_arguments)]
 fn subtree_impl<const LOCAL_SMALL: bool>(
