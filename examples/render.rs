@@ -77,7 +77,7 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
     };
     let build_s = t0.elapsed().as_secs_f64();
     let t0 = Instant::now();
-    let bvh = Bvh8::from_bvh2(&bvh2, &tris[..]).expect("a built tree collapses");
+    let bvh = Bvh8::from_bvh2_par(&bvh2, &tris[..], o.threads).expect("a built tree collapses");
     let collapse_s = t0.elapsed().as_secs_f64();
     println!(
         "build: binned SAH on up to {} threads {:.1} ms ({:.1} M tri/s, {} invalid triangles skipped), collapse to BVH8 {:.1} ms, SAH cost {:.1}, {} BVH8 nodes",

@@ -1,5 +1,7 @@
 //! BVH2 -> BVH4/BVH8: the greedy largest-surface-area collapse.
 
+#[cfg(feature = "std")]
+use super::EMPTY_CHILD;
 use super::{BvhWide, LEAF_BIT, MAX_LEAF_PACKS, MAX_WIDE_DEPTH, WideNode};
 use crate::build::Bvh2;
 use crate::geometry::{Aabb, Triangle, Triangles};
@@ -32,13 +34,16 @@ impl core::fmt::Display for CollapseError {
 
 impl core::error::Error for CollapseError {}
 
+/// A wide node still to fill: binary node, wide node slot, depth.
+type Job = (u32, usize, u32);
+
 struct Builder<'a, L, const N: usize, P: ?Sized> {
     bvh: &'a Bvh2,
     tris: &'a P,
     /// Primitives below each binary node.
-    counts: Vec<u32>,
+    counts: &'a [u32],
     /// The cost-optimal collapse's table (empty: the greedy collapse).
-    plan: Plan,
+    plan: &'a Plan,
     nodes: Vec<WideNode<L, N>>,
     packs: Vec<TriangleLanes<L, N>>,
     depth: u32,
@@ -142,8 +147,27 @@ impl<L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'_, L, N, P> {
     /// stack: no recursion on the tree depth).
     fn run(&mut self, root: u32) -> Result<(), CollapseError> {
         let at = self.new_node(1)?;
-        let mut todo = vec![(root, at, 1u32)];
+        self.run_from(root, at, 1, None)
+    }
+
+    /// [`run`](Self::run) from binary node `b` into the (new) wide node `at` at `depth`; with
+    /// `defer = Some((jobs, grain))`, a wide node to be made of a binary node with at most
+    /// `grain` primitives below is left empty and pushed to `jobs` (the parallel collapse).
+    fn run_from(
+        &mut self,
+        b: u32,
+        at: usize,
+        depth: u32,
+        mut defer: Option<(&mut Vec<Job>, usize)>,
+    ) -> Result<(), CollapseError> {
+        let mut todo = vec![(b, at, depth)];
         while let Some((b, at, depth)) = todo.pop() {
+            if let Some((jobs, grain)) = defer.as_mut()
+                && self.count(b) <= *grain
+            {
+                jobs.push((b, at, depth));
+                continue;
+            }
             // Open the child with the largest surface area until there are N.
             let node = *self.bnode(b)?;
             let mut kids: Vec<u32> = if node.is_leaf() {
@@ -401,8 +425,8 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         let mut b = Builder::<L, N, P> {
             bvh,
             tris,
-            counts,
-            plan,
+            counts: &counts,
+            plan: &plan,
             nodes: Vec::new(),
             packs: Vec::new(),
             depth: 0,
@@ -419,8 +443,129 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         })
     }
 
+    /// [`from_bvh2`](Self::from_bvh2) on up to `threads` threads (`std`): the same tree, node
+    /// for node and pack for pack, numbered in another order. The cost-optimal plan is made on
+    /// the calling thread; the wide nodes and packs of subtrees of at most `n / (8 threads)`
+    /// triangles (at least 4,096) side by side. Trees of up to 8,192 triangles are collapsed on
+    /// the calling thread.
+    ///
+    /// ```
+    /// use strahl::{build::{Bvh2, BuildParams}, layout::Bvh8, scene, traverse::Moller};
+    /// let tris = scene::thin_soup(20_000, 1);
+    /// let (bvh2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let one = Bvh8::from_bvh2(&bvh2, &tris[..]).unwrap();
+    /// let two = Bvh8::from_bvh2_par(&bvh2, &tris[..], 2).unwrap();
+    /// assert_eq!((one.nodes().len(), one.packs().len()), (two.nodes().len(), two.packs().len()));
+    /// let ray = strahl::Ray::new(strahl::Vec3::splat(-1.0), strahl::Vec3::ONE);
+    /// assert_eq!(one.intersect::<Moller>(&ray), two.intersect::<Moller>(&ray));
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn from_bvh2_par<P: Triangles + Sync + ?Sized>(
+        bvh: &Bvh2,
+        tris: &P,
+        threads: usize,
+    ) -> Result<Self, CollapseError>
+    where
+        L: Send + Sync,
+    {
+        use core::sync::atomic::{AtomicUsize, Ordering};
+        use std::sync::Mutex;
+        let () = Self::LANES_MATCH;
+        let threads = threads.clamp(1, crate::build::MAX_THREADS);
+        let counts = subtree_counts(bvh)?;
+        let total = counts.first().copied().unwrap_or(0) as usize;
+        if threads == 1 || total <= 2 * PAR_GRAIN {
+            return Self::collapse::<P, false>(bvh, tris);
+        }
+        let plan = Plan::new(bvh, &counts, N)?;
+        let builder = || Builder::<L, N, P> {
+            bvh,
+            tris,
+            counts: &counts,
+            plan: &plan,
+            nodes: Vec::new(),
+            packs: Vec::new(),
+            depth: 0,
+        };
+        // The top on this thread, down to subtrees of at most `grain` triangles.
+        let grain = (total / threads.saturating_mul(8)).max(PAR_GRAIN);
+        let mut top = builder();
+        let mut jobs = Vec::new();
+        let at = top.new_node(1)?;
+        top.run_from(0, at, 1, Some((&mut jobs, grain)))?;
+        // The subtrees side by side, largest first, each into its own arrays.
+        type Done<L, const N: usize> = (Vec<WideNode<L, N>>, Vec<TriangleLanes<L, N>>, u32);
+        type Part<L, const N: usize> = Result<Done<L, N>, CollapseError>;
+        let mut order: Vec<usize> = (0..jobs.len()).collect();
+        order.sort_by_key(|&j| core::cmp::Reverse(counts.get(jobs[j].0 as usize).copied().unwrap_or(0)));
+        let parts: Vec<Mutex<Option<Part<L, N>>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
+        let next = AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for _ in 0..threads.min(jobs.len()) {
+                s.spawn(|| {
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(&j) = order.get(i) else { break };
+                        let (b, _, depth) = jobs[j];
+                        let mut w = builder();
+                        let part = w
+                            .new_node(depth)
+                            .and_then(|at| w.run_from(b, at, depth, None))
+                            .map(|()| (w.nodes, w.packs, w.depth));
+                        if let Ok(mut g) = parts[j].lock() {
+                            *g = Some(part);
+                        }
+                    }
+                });
+            }
+        });
+        // In job order: node i >= 1 of a part goes to `base + i - 1`, node 0 to the job's slot;
+        // its packs follow the packs so far.
+        let mut packs_total = top.packs.len();
+        let mut done: Vec<Done<L, N>> = Vec::with_capacity(jobs.len());
+        for p in parts {
+            let p = p.into_inner().ok().flatten().ok_or(CollapseError::Malformed)??;
+            packs_total += p.1.len();
+            done.push(p);
+        }
+        if packs_total >= 1 << 27 {
+            return Err(CollapseError::TooLarge);
+        }
+        let mut packs = super::pages::advised_with_capacity(packs_total);
+        packs.extend_from_slice(&top.packs);
+        let (mut nodes, mut depth) = (top.nodes, top.depth);
+        for (&(_, at, _), (pn, pp, pd)) in jobs.iter().zip(done) {
+            let (base, pbase) = (nodes.len() as u32, packs.len() as u32);
+            let relocate = |mut node: WideNode<L, N>| {
+                for c in node.child.iter_mut() {
+                    *c = if *c == EMPTY_CHILD {
+                        *c
+                    } else if *c & LEAF_BIT != 0 {
+                        *c + (pbase << 4)
+                    } else {
+                        base + *c - 1
+                    };
+                }
+                node
+            };
+            nodes[at] = relocate(pn[0]);
+            nodes.extend(pn[1..].iter().map(|&n| relocate(n)));
+            packs.extend_from_slice(&pp);
+            depth = depth.max(pd);
+        }
+        Ok(Self {
+            nodes: super::pages::to_huge_pages(nodes),
+            packs,
+            depth,
+        })
+    }
+
     const LANES_MATCH: () = assert!(L::N == N && N <= 8);
 }
+
+/// The parallel collapse does not cut the tree below this many triangles per subtree.
+#[cfg(feature = "std")]
+const PAR_GRAIN: usize = 4096;
 
 #[cfg(test)]
 mod tests {

@@ -28,6 +28,18 @@ pub(crate) fn to_huge_pages<T: Copy>(v: Vec<T>) -> Vec<T> {
     out
 }
 
+/// An empty vector with room for `n` elements, advised for transparent huge pages if that is
+/// at least [`MIN_BYTES`] (see the [module docs](self)), to be filled without reallocating.
+#[cfg(feature = "std")]
+pub(crate) fn advised_with_capacity<T>(n: usize) -> Vec<T> {
+    let mut v = Vec::<T>::with_capacity(n);
+    let bytes = n.saturating_mul(core::mem::size_of::<T>());
+    if bytes >= MIN_BYTES {
+        advise(v.as_mut_ptr().cast(), bytes);
+    }
+    v
+}
+
 /// Advises the whole 4 KiB pages in `ptr .. ptr + bytes` for huge pages; returns whether the
 /// kernel accepted.
 #[cfg(all(feature = "hugepages", target_os = "linux"))]
