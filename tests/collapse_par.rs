@@ -135,27 +135,132 @@ fn same_wide_tree_as_the_single_threaded_collapse() {
             same_tree(&a, &b).unwrap_or_else(|e| panic!("{name} / {pname} / parallel build: {e}"));
         }
     }
-    // Every triangle the same: big leaves (more than 16 packs get a node of their own).
+    // Every triangle the same: forced middle splits down to leaves of 200 (25,600 / 2^7), more
+    // than 16 packs, so each gets a wide node of its own.
     let t = [strahl::Vec3::ZERO, strahl::Vec3::X, strahl::Vec3::Y];
-    let same = vec![t; 20_000];
-    let (bvh, _) = Bvh2::build(
-        &same[..],
-        &BuildParams {
-            max_leaf_size: 64,
-            ..BuildParams::fast()
-        },
-    )
-    .unwrap();
+    let same = vec![t; 25_600];
+    let p = BuildParams {
+        max_leaf_size: 200,
+        ..BuildParams::fast()
+    };
+    let (bvh, _) = Bvh2::build(&same[..], &p).unwrap();
+    assert!(
+        bvh.nodes.iter().any(|n| n.count > 128),
+        "leaves of more than 16 packs expected"
+    );
     check("same_triangle", &same, &bvh);
 }
 
 #[test]
-fn malformed_trees_are_errors_in_parallel_too() {
+fn the_parallel_path_runs_and_odd_inputs_collapse_alike() {
+    let tris = scene::thin_soup(40_000, 6);
+    let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::fast()).unwrap();
+    let seq = BvhWide::<f32x8, 8>::from_bvh2(&bvh, &tris[..]).unwrap();
+    let par = BvhWide::<f32x8, 8>::from_bvh2_par(&bvh, &tris[..], 2).unwrap();
+    // Renumbered: the subtrees were made apart.
+    assert!(seq.nodes().iter().zip(par.nodes()).any(|(a, b)| a.child != b.child));
+    // Thread counts 0 (taken as 1) and usize::MAX (capped).
+    for threads in [0, usize::MAX] {
+        let w = BvhWide::<f32x8, 8>::from_bvh2_par(&bvh, &tris[..], threads).unwrap();
+        same_tree(&seq, &w).unwrap_or_else(|e| panic!("{threads} threads: {e}"));
+    }
+    // A root that is one leaf of 20,000 triangles (wide nodes over its packs).
+    let one_leaf = BuildParams {
+        min_leaf_size: 20_000,
+        max_leaf_size: 20_000,
+        ..BuildParams::fast()
+    };
+    let few = &tris[..20_000];
+    let (leaf, _) = Bvh2::build(few, &one_leaf).unwrap();
+    assert_eq!(leaf.nodes.len(), 1);
+    let a = BvhWide::<f32x8, 8>::from_bvh2(&leaf, few).unwrap();
+    let b = BvhWide::<f32x8, 8>::from_bvh2_par(&leaf, few, 2).unwrap();
+    same_tree(&a, &b).unwrap();
+}
+
+/// A chain: every interior node has a leaf of `leaf` triangles on the left and the rest of the
+/// chain on the right, `depth` interior nodes deep.
+fn chain(tris: &[Triangle], depth: usize, leaf: usize) -> Bvh2 {
+    let bounds = |r: core::ops::Range<usize>| {
+        let mut b = strahl::Aabb::EMPTY;
+        for t in &tris[r] {
+            for v in t {
+                b.grow(*v);
+            }
+        }
+        b
+    };
+    let node = |b: strahl::Aabb, index: u32, count: u32| strahl::build::Node {
+        min: b.min.to_array(),
+        index,
+        max: b.max.to_array(),
+        count,
+    };
+    let n = tris.len();
+    let mut bvh = Bvh2 {
+        nodes: vec![node(bounds(0..n), 0, 0)],
+        prim_indices: (0..n as u32).collect(),
+    };
+    let mut at = 0;
+    for d in 0..depth {
+        let lo = d * leaf;
+        let left = bvh.nodes.len() as u32;
+        bvh.nodes[at].index = left;
+        bvh.nodes.push(node(bounds(lo..lo + leaf), lo as u32, leaf as u32));
+        let rest = lo + leaf..n;
+        if d + 1 == depth {
+            bvh.nodes
+                .push(node(bounds(rest.clone()), rest.start as u32, rest.len() as u32));
+        } else {
+            bvh.nodes.push(node(bounds(rest), 0, 0));
+        }
+        at = left as usize + 1;
+    }
+    bvh
+}
+
+#[test]
+fn errors_are_the_single_threaded_ones() {
     let tris = scene::thin_soup(20_000, 5);
     let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::fast()).unwrap();
     // A leaf pointing past the primitive indices, deep in the tree.
     let k = bvh.nodes.iter().rposition(|n| n.count > 0).unwrap();
     bvh.nodes[k].index = u32::MAX - 4;
-    assert!(BvhWide::<f32x8, 8>::from_bvh2_par(&bvh, &tris[..], 2).is_err());
-    assert!(BvhWide::<f32x8, 8>::from_bvh2(&bvh, &tris[..]).is_err());
+    let want = BvhWide::<f32x8, 8>::from_bvh2(&bvh, &tris[..]).unwrap_err();
+    for threads in [2, 3] {
+        assert_eq!(
+            BvhWide::<f32x8, 8>::from_bvh2_par(&bvh, &tris[..], threads).unwrap_err(),
+            want
+        );
+    }
+    // Too deep: a chain of 15,000 interior nodes with a one-triangle leaf beside each; then the
+    // same chain with a malformed leaf far down.
+    let tris = scene::thin_soup(16_000, 2);
+    let mut deep = chain(&tris, 15_000, 1);
+    for threads in [2, usize::MAX] {
+        let want8 = BvhWide::<f32x8, 8>::from_bvh2(&deep, &tris[..]).unwrap_err();
+        assert_eq!(
+            BvhWide::<f32x8, 8>::from_bvh2_par(&deep, &tris[..], threads).unwrap_err(),
+            want8
+        );
+        let want4 = BvhWide::<f32x4, 4>::from_bvh2(&deep, &tris[..]).unwrap_err();
+        assert_eq!(
+            BvhWide::<f32x4, 4>::from_bvh2_par(&deep, &tris[..], threads).unwrap_err(),
+            want4
+        );
+    }
+    let k = deep.nodes.len() - 2;
+    deep.nodes[k].count = 70_000;
+    let want = BvhWide::<f32x8, 8>::from_bvh2(&deep, &tris[..]).unwrap_err();
+    assert_eq!(
+        BvhWide::<f32x8, 8>::from_bvh2_par(&deep, &tris[..], 2).unwrap_err(),
+        want
+    );
+    // A chain of leaves of 300 triangles (more than 16 packs each), shallow enough to collapse.
+    let tris = scene::thin_soup(30_000, 8);
+    let ok = chain(&tris, 60, 300);
+    assert!(ok.validate(&tris[..]).is_ok());
+    let a = BvhWide::<f32x8, 8>::from_bvh2(&ok, &tris[..]).unwrap();
+    let b = BvhWide::<f32x8, 8>::from_bvh2_par(&ok, &tris[..], 2).unwrap();
+    same_tree(&a, &b).unwrap();
 }

@@ -443,11 +443,13 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         })
     }
 
-    /// [`from_bvh2`](Self::from_bvh2) on up to `threads` threads (`std`): the same tree, node
-    /// for node and pack for pack, numbered in another order. The cost-optimal plan is made on
-    /// the calling thread; the wide nodes and packs of subtrees of at most `n / (8 threads)`
-    /// triangles (at least 4,096) side by side. Trees of up to 8,192 triangles are collapsed on
-    /// the calling thread.
+    /// [`from_bvh2`](Self::from_bvh2) on up to `threads` threads (`std`; at least 1, at most
+    /// [`MAX_THREADS`](crate::build::MAX_THREADS)): the same tree, node for node and pack for
+    /// pack, numbered in another order (the same bytes on every run with the same `threads`).
+    /// The cost-optimal plan is made on the calling thread; the wide nodes and packs of subtrees
+    /// of at most `n / (8 threads)` triangles (at least 4,096) side by side. Trees of up to 8,192
+    /// triangles are collapsed on the calling thread, and so is a tree that cannot be collapsed
+    /// (the same error as `from_bvh2`).
     ///
     /// ```
     /// use strahl::{build::{Bvh2, BuildParams}, layout::Bvh8, scene, traverse::Moller};
@@ -491,8 +493,13 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         let grain = (total / threads.saturating_mul(8)).max(PAR_GRAIN);
         let mut top = builder();
         let mut jobs = Vec::new();
-        let at = top.new_node(1)?;
-        top.run_from(0, at, 1, Some((&mut jobs, grain)))?;
+        // NOTE: on any error the sequential collapse runs instead, so that the error is the one
+        // it reports (the parallel order of work could meet another error first).
+        let sequential = || Self::collapse::<P, false>(bvh, tris);
+        let Ok(at) = top.new_node(1) else { return sequential() };
+        if top.run_from(0, at, 1, Some((&mut jobs, grain))).is_err() {
+            return sequential();
+        }
         // The subtrees side by side, largest first, each into its own arrays.
         type Done<L, const N: usize> = (Vec<WideNode<L, N>>, Vec<TriangleLanes<L, N>>, u32);
         type Part<L, const N: usize> = Result<Done<L, N>, CollapseError>;
@@ -524,12 +531,14 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         let mut packs_total = top.packs.len();
         let mut done: Vec<Done<L, N>> = Vec::with_capacity(jobs.len());
         for p in parts {
-            let p = p.into_inner().ok().flatten().ok_or(CollapseError::Malformed)??;
+            let Some(Ok(p)) = p.into_inner().ok().flatten() else {
+                return sequential();
+            };
             packs_total += p.1.len();
             done.push(p);
         }
         if packs_total >= 1 << 27 {
-            return Err(CollapseError::TooLarge);
+            return sequential();
         }
         let mut packs = super::pages::advised_with_capacity(packs_total);
         packs.extend_from_slice(&top.packs);
