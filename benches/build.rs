@@ -72,6 +72,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, BvhStats, MortonBits, Node, Refine, TreeletParams};
 use strahl::geometry::Triangle;
+use strahl::layout::Bvh8;
 use strahl::scene::{self, Rng};
 use strahl::traverse::{STACK_SIZE, Watertight, intersect_scalar};
 use strahl::{Aabb, Ray, Vec3};
@@ -923,7 +924,8 @@ fn build(c: &mut Criterion) {
 
 /// `build_threads/soup1M`: the parallel builds (`Builder::build_into_par`, warm) of the builders
 /// that have one, on 1 thread and on every core (`available_parallelism`), side by side; each
-/// parallel tree is checked to have the single-threaded tree's SAH cost.
+/// parallel tree is checked to have the single-threaded tree's SAH cost. Then the BVH8 collapse
+/// (`Bvh8::from_bvh2` and `from_bvh2_par`, fresh memory each time, as a one-off build).
 fn build_threads(c: &mut Criterion) {
     let tris = scene::thin_soup(1 << 20, 1);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -959,6 +961,23 @@ fn build_threads(c: &mut Criterion) {
                 break;
             }
         }
+    }
+    // The cost-optimal BVH8 collapse of the `balanced()` tree, `from_bvh2` against
+    // `from_bvh2_par` (whose tree is checked to have as many nodes and packs).
+    let (bvh2, _) = Bvh2::build(&tris[..], &BuildParams::balanced()).expect("valid params");
+    let one = Bvh8::from_bvh2(&bvh2, &tris[..]).expect("a built tree collapses");
+    let many = Bvh8::from_bvh2_par(&bvh2, &tris[..], cores).expect("a built tree collapses");
+    assert_eq!(
+        (one.nodes().len(), one.packs().len()),
+        (many.nodes().len(), many.packs().len())
+    );
+    g.bench_function("collapse_bvh8/1", |b| {
+        b.iter(|| Bvh8::from_bvh2(black_box(&bvh2), &tris[..]))
+    });
+    if cores > 1 {
+        g.bench_function(format!("collapse_bvh8/{cores}"), |b| {
+            b.iter(|| Bvh8::from_bvh2_par(black_box(&bvh2), &tris[..], cores))
+        });
     }
     g.finish();
 }
