@@ -74,7 +74,17 @@ pub struct Builder {
 /// Builds of at most this many (valid) primitives run on the calling thread.
 const PAR_MIN: usize = 8192;
 
-/// The most threads a parallel build ([`Builder::build_into_par`]) starts.
+/// The most threads a parallel build or collapse starts ([`Builder::build_into_par`],
+/// [`Bvh2::build_par`], `BvhWide::from_bvh2_par`); larger requests are capped (`std`).
+///
+/// ```
+/// use strahl::{build::{BuildParams, Bvh2, MAX_THREADS}, scene};
+/// let soup = scene::thin_soup(10_000, 1);
+/// // Asking for more threads than MAX_THREADS is allowed: the build uses at most that many.
+/// let (bvh, _) = Bvh2::build_par(&soup[..], &BuildParams::fast(), MAX_THREADS + 1).unwrap();
+/// assert!(bvh.validate(&soup[..]).is_ok());
+/// ```
+#[cfg(feature = "std")]
 pub const MAX_THREADS: usize = 256;
 
 /// What a builder reports besides the tree.
@@ -122,8 +132,8 @@ impl Builder {
     /// [`Strategy::BinnedSah`]: the top of the tree in rounds, each splitting every large task
     /// once, the round's tasks side by side; then the remaining subtrees side by side) and the
     /// HLBVH with SAH mini-trees ([`Strategy::HlbvhSah`]: the mini-trees side by side). The other
-    /// strategies, and a refinement pass, run on the calling thread. Below 8,192 primitives the
-    /// build is single-threaded; `threads` is taken as at least 1 and at most [`MAX_THREADS`].
+    /// strategies, and a refinement pass, run on the calling thread. Up to 8,192 (valid) primitives
+    /// the build is single-threaded; `threads` is taken as at least 1 and at most [`MAX_THREADS`].
     ///
     /// ```
     /// use strahl::{build::{Builder, BuildParams, Bvh2}, scene};

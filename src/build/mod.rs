@@ -222,7 +222,9 @@ mod topdown;
 mod treelet;
 mod validate;
 
-pub use builder::{Builder, MAX_THREADS};
+pub use builder::Builder;
+#[cfg(feature = "std")]
+pub use builder::MAX_THREADS;
 pub use params::{
     BinAxes, BuildParams, MAX_BINS, MAX_CLUSTER_SIZE, MAX_LEAF_SIZE, MIN_BINS, MIN_DEPTH, MortonBits, Refine, Strategy,
     TreeletParams,

@@ -8,6 +8,14 @@
 //! [`binned::SMALL`] references take an exact sweep instead of binning, their whole subtree at
 //! once in local arrays ([`small`](super::small)) where the depth bound cannot bind. The median
 //! split reorders in place. A leaf copies its primitive indices straight from whichever buffer holds it.
+//!
+//! **In parallel** (`std`, [`build_refs_par`]): the same loop, in rounds. With a deferral, a task
+//! no larger than the grain is pushed to a list instead of built; each round splits every task
+//! above the grain once (grain: one less than the task), the round's tasks side by side, each
+//! worker into its own arrays ([`build_tasks_par`]), which are then moved into the output in
+//! range order. Once every task is at most `n / (8 threads)` references (at least
+//! [`PAR_GRAIN`]), a last round builds their whole subtrees. Every split is the one the
+//! sequential loop makes, so the tree is the same; only the nodes' numbering differs.
 
 use super::binned::{self, Binning, Bins};
 use super::builder::{Builder, Counters};

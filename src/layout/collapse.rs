@@ -1,4 +1,5 @@
-//! BVH2 -> BVH4/BVH8: the greedy largest-surface-area collapse.
+//! BVH2 -> BVH4/BVH8: the cost-optimal and the greedy collapse, and the cost-optimal one on
+//! several threads ([`BvhWide::from_bvh2_par`], `std`).
 
 #[cfg(feature = "std")]
 use super::EMPTY_CHILD;

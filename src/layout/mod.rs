@@ -15,7 +15,9 @@
 //! subtree of at most `N` triangles one pack. On the bunny and a 262k sphereflake the optimal
 //! collapse makes 2.6 to 3 times fewer nodes (7.7 to 7.9 of 8 children used instead of 3.9 to
 //! 4.2) and traces 1 to 3% (primary rays) and 6 to 11% (diffuse rays) faster
-//! (`tests/collapse_speed.rs`); by its own cost model it is never worse (tested).
+//! (`tests/collapse_speed.rs`); by its own cost model it is never worse (tested). With `std`,
+//! `BvhWide::from_bvh2_par` makes the same cost-optimal tree on several threads (subtrees side
+//! by side, numbered differently; `tests/collapse_par.rs`).
 
 //! # Layout
 //! ```text
@@ -90,7 +92,8 @@ impl<L: Lane, const N: usize> WideNode<L, N> {
 ///
 /// Nothing is checked on construction: traversal never panics and always terminates on any
 /// slices (codes out of range are skipped, a tree deeper than [`MAX_WIDE_DEPTH`] loses the nodes
-/// that do not fit on the stack). Trees from [`BvhWide::from_bvh2`] are always within bounds.
+/// that do not fit on the stack). Trees from [`BvhWide::from_bvh2`] (and its parallel form) are
+/// always within bounds.
 #[derive(Clone, Copy, Debug)]
 pub struct BvhWideRef<'a, L, const N: usize> {
     /// Nodes; the root is `nodes[0]`.
@@ -105,13 +108,14 @@ pub type Bvh4Ref<'a> = BvhWideRef<'a, f32x4, 4>;
 pub type Bvh8Ref<'a> = BvhWideRef<'a, f32x8, 8>;
 
 /// An `N`-wide BVH over triangles, owning its nodes and packs. Build it with
-/// [`BvhWide::from_bvh2`]; trace it with [`BvhWide::intersect`] and [`BvhWide::occluded`].
+/// [`BvhWide::from_bvh2`] (or, with `std`, on several threads with `BvhWide::from_bvh2_par`);
+/// trace it with [`BvhWide::intersect`] and [`BvhWide::occluded`].
 ///
 /// The fields are private so that every value keeps the invariants traversal is exact under:
 /// every code in range and the depth within [`MAX_WIDE_DEPTH`].
 ///
-/// With the `hugepages` feature (default) on Linux, [`from_bvh2`](Self::from_bvh2) moves node and
-/// pack arrays of 4 MiB or more into memory advised for transparent huge pages, as Embree does
+/// With the `hugepages` feature (default) on Linux, [`from_bvh2`](Self::from_bvh2) (and its
+/// parallel form) moves node and pack arrays of 4 MiB or more into memory advised for transparent huge pages, as Embree does
 /// with its trees (measured: about 1.2x on 1M-triangle scenes, whose node and leaf reads miss the
 /// TLB on 4 KiB pages). A hint only; the move briefly holds both copies, and a `clone` is an
 /// ordinary allocation.
@@ -130,8 +134,8 @@ pub type Bvh4 = BvhWide<f32x4, 4>;
 #[cfg(feature = "alloc")]
 pub type Bvh8 = BvhWide<f32x8, 8>;
 
-/// The deepest wide tree traversal handles exactly (root = 1); [`BvhWide::from_bvh2`] refuses
-/// deeper ones. The traversal stack holds `MAX_WIDE_DEPTH * (N - 1) + 1` entries.
+/// The deepest wide tree traversal handles exactly (root = 1); [`BvhWide::from_bvh2`] (and its
+/// parallel form) refuses deeper ones. The traversal stack holds `MAX_WIDE_DEPTH * (N - 1) + 1` entries.
 pub const MAX_WIDE_DEPTH: u32 = 72;
 
 #[cfg(feature = "alloc")]
