@@ -73,6 +73,8 @@ pub mod geometry;
 pub mod intersect;
 pub mod layout;
 pub mod math;
+#[cfg(feature = "std")]
+mod par;
 #[cfg(feature = "alloc")]
 pub mod scene;
 pub mod traverse;

@@ -236,44 +236,42 @@ pub(crate) fn build_tasks_par(
     order.sort_by_key(|&i| core::cmp::Reverse(tasks[i].end - tasks[i].begin));
     let landed: Vec<Mutex<Option<Landed>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
     let next = AtomicUsize::new(0);
-    std::thread::scope(|s| {
-        for (w, ws) in scratch[..workers].iter_mut().enumerate() {
-            let (jobs, order, landed, next) = (&jobs, &order, &landed, &next);
-            s.spawn(move || {
-                let mut bins = Bins::new();
-                ws.out.nodes.clear();
-                ws.out.prim_indices.clear();
-                ws.left.clear();
-                loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&j) = order.get(i) else { break };
-                    let Some((mut t, r, a)) = jobs[j].lock().ok().and_then(|mut g| g.take()) else {
-                        continue;
-                    };
-                    let (node, slot) = (ws.out.nodes.len(), ws.out.prim_indices.len());
-                    t.node = node as u32;
-                    ws.out.nodes.push(t.bounds.to_node(0, 0));
-                    ws.out.prim_indices.resize(slot + t.end as usize, 0);
-                    let mut lc = Counters::default();
-                    let first_left = ws.left.len();
-                    let defer = split_once.then(|| (&mut ws.left, t.end.saturating_sub(1)));
-                    let (wout, wstack) = (&mut ws.out, &mut ws.stack);
-                    subtree_impl::<true>(r, a, p, wout, t, &mut bins, wstack, &mut lc, defer, slot as u32);
-                    let nodes = ws.out.nodes.len() - node;
-                    if let Ok(mut g) = landed[j].lock() {
-                        *g = Some(Landed {
-                            worker: w,
-                            node,
-                            nodes,
-                            slot,
-                            left: first_left..ws.left.len(),
-                            c: lc,
-                        });
-                    }
+    {
+        let (jobs, order, landed, next) = (&jobs, &order, &landed, &next);
+        crate::par::each(scratch[..workers].iter_mut().enumerate(), |(w, ws)| {
+            let mut bins = Bins::new();
+            ws.out.nodes.clear();
+            ws.out.prim_indices.clear();
+            ws.left.clear();
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&j) = order.get(i) else { break };
+                let Some((mut t, r, a)) = jobs[j].lock().ok().and_then(|mut g| g.take()) else {
+                    continue;
+                };
+                let (node, slot) = (ws.out.nodes.len(), ws.out.prim_indices.len());
+                t.node = node as u32;
+                ws.out.nodes.push(t.bounds.to_node(0, 0));
+                ws.out.prim_indices.resize(slot + t.end as usize, 0);
+                let mut lc = Counters::default();
+                let first_left = ws.left.len();
+                let defer = split_once.then(|| (&mut ws.left, t.end.saturating_sub(1)));
+                let (wout, wstack) = (&mut ws.out, &mut ws.stack);
+                subtree_impl::<true>(r, a, p, wout, t, &mut bins, wstack, &mut lc, defer, slot as u32);
+                let nodes = ws.out.nodes.len() - node;
+                if let Ok(mut g) = landed[j].lock() {
+                    *g = Some(Landed {
+                        worker: w,
+                        node,
+                        nodes,
+                        slot,
+                        left: first_left..ws.left.len(),
+                        c: lc,
+                    });
                 }
-            });
-        }
-    });
+            }
+        });
+    }
     let landed: Vec<Landed> = landed
         .into_iter()
         .filter_map(|m| m.into_inner().ok().flatten())
@@ -335,10 +333,10 @@ pub(crate) fn build_tasks_par(
     }
     let next = AtomicUsize::new(0);
     let scratch = &*scratch;
-    std::thread::scope(|s| {
-        for _ in 0..workers {
-            let (moves, order, next, tasks, landed, base) = (&moves, &order, &next, &tasks, &landed, &base);
-            s.spawn(move || {
+    {
+        let (moves, order, next, tasks, landed, base) = (&moves, &order, &next, &tasks, &landed, &base);
+        crate::par::each(0..workers, |_| {
+            {
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&j) = order.get(i) else { break };
@@ -356,9 +354,9 @@ pub(crate) fn build_tasks_par(
                         pdst.copy_from_slice(&w.prim_indices[l.slot..l.slot + pdst.len()]);
                     }
                 }
-            });
-        }
-    });
+            }
+        });
+    }
     left
 }
 

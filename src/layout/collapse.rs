@@ -508,23 +508,19 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         order.sort_by_key(|&j| core::cmp::Reverse(counts.get(jobs[j].0 as usize).copied().unwrap_or(0)));
         let parts: Vec<Mutex<Option<Part<L, N>>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
         let next = AtomicUsize::new(0);
-        std::thread::scope(|s| {
-            for _ in 0..threads.min(jobs.len()) {
-                s.spawn(|| {
-                    loop {
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        let Some(&j) = order.get(i) else { break };
-                        let (b, _, depth) = jobs[j];
-                        let mut w = builder();
-                        let part = w
-                            .new_node(depth)
-                            .and_then(|at| w.run_from(b, at, depth, None))
-                            .map(|()| (w.nodes, w.packs, w.depth));
-                        if let Ok(mut g) = parts[j].lock() {
-                            *g = Some(part);
-                        }
-                    }
-                });
+        crate::par::each(0..threads.min(jobs.len()), |_| {
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&j) = order.get(i) else { break };
+                let (b, _, depth) = jobs[j];
+                let mut w = builder();
+                let part = w
+                    .new_node(depth)
+                    .and_then(|at| w.run_from(b, at, depth, None))
+                    .map(|()| (w.nodes, w.packs, w.depth));
+                if let Ok(mut g) = parts[j].lock() {
+                    *g = Some(part);
+                }
             }
         });
         // In job order: node i >= 1 of a part goes to `base + i - 1`, node 0 to the job's slot;

@@ -250,8 +250,9 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
         }
     }
 
-    /// [`intersect_batch`](Self::intersect_batch) on `threads` threads (`std`): the batch is cut
-    /// into chunks of 1024 rays taken from a shared counter.
+    /// [`intersect_batch`](Self::intersect_batch) on `threads` threads (`std`; at least 1, at
+    /// most [`MAX_THREADS`](crate::build::MAX_THREADS)): the batch is cut into chunks of 1024
+    /// rays taken from a shared counter.
     #[cfg(feature = "std")]
     pub fn intersect_batch_par<T: TriangleTest>(&self, rays: &[Ray], hits: &mut [Option<Hit>], threads: usize)
     where
@@ -278,17 +279,13 @@ fn par_chunks<O: Send, F: Fn(&[Ray], &mut [O]) + Sync>(rays: &[Ray], out: &mut [
     let n = rays.len().min(out.len());
     let work: Mutex<core::iter::Zip<core::slice::Chunks<'_, Ray>, core::slice::ChunksMut<'_, O>>> =
         Mutex::new(rays[..n].chunks(CHUNK).zip(out[..n].chunks_mut(CHUNK)));
-    std::thread::scope(|s| {
-        for _ in 0..threads.max(1) {
-            s.spawn(|| {
-                loop {
-                    let next = work.lock().map(|mut w| w.next()).unwrap_or(None);
-                    match next {
-                        Some((r, o)) => f(r, o),
-                        None => break,
-                    }
-                }
-            });
+    crate::par::each(0..threads.clamp(1, crate::build::MAX_THREADS), |_| {
+        loop {
+            let next = work.lock().map(|mut w| w.next()).unwrap_or(None);
+            match next {
+                Some((r, o)) => f(r, o),
+                None => break,
+            }
         }
     });
 }
