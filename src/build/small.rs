@@ -412,7 +412,7 @@ mod tests {
         s.b.extend_from_slice(refs);
         let bins = s.bins.get_or_insert_with(|| alloc::boxed::Box::new(Bins::new()));
         let task = Task::new([0, 0, refs.len() as u32, 1], bx, cb);
-        topdown::subtree_with::<LOCAL>(&mut s.a, &mut s.b, p, out, task, bins, &mut s.stack, &mut c);
+        topdown::subtree_with::<LOCAL>(&mut s.a, &mut s.b, p, out, task, bins, &mut s.stack, &mut c, None, 0);
         c
     }
 

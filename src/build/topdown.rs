@@ -84,7 +84,17 @@ pub(crate) fn build_refs(
     p: &BuildParams,
     out: &mut Bvh2,
 ) -> Counters {
-    let n = refs.len();
+    let root = start(refs.len(), alt, info, out);
+    let mut bins = Bins::new();
+    let mut c = Counters::default();
+    // Left children are taken first, so the stack holds at most one right sibling per level.
+    let mut stack: Vec<Task> = Vec::with_capacity(p.max_depth as usize + 1);
+    subtree(refs, alt, p, out, root, &mut bins, &mut stack, &mut c);
+    c
+}
+
+/// Sizes `alt` and `out` for a build over `n` references and makes the root node: the root task.
+fn start(n: usize, alt: &mut Vec<PrimRef>, info: &PrepInfo, out: &mut Bvh2) -> Task {
     // NOTE: resized only when the length changes; ranges are written before they are read.
     if alt.len() != n {
         alt.resize(n, PrimRef(Default::default()));
@@ -92,13 +102,7 @@ pub(crate) fn build_refs(
     out.prim_indices.resize(n, 0);
     out.nodes.reserve((2 * n).saturating_sub(1));
     out.nodes.push(info.bounds.to_node(0, 0));
-    let mut bins = Bins::new();
-    let mut c = Counters::default();
-    // Left children are taken first, so the stack holds at most one right sibling per level.
-    let mut stack: Vec<Task> = Vec::with_capacity(p.max_depth as usize + 1);
-    let root = Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds);
-    subtree(refs, alt, p, out, root, &mut bins, &mut stack, &mut c);
-    c
+    Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds)
 }
 
 /// [`build_refs`] on `threads` threads (`std`). In rounds, every task of more than
@@ -120,15 +124,9 @@ pub(crate) fn build_refs_par(
     if threads <= 1 {
         return build_refs(refs, alt, info, p, out);
     }
-    if alt.len() != n {
-        alt.resize(n, PrimRef(Default::default()));
-    }
-    out.prim_indices.resize(n, 0);
-    out.nodes.reserve((2 * n).saturating_sub(1));
-    out.nodes.push(info.bounds.to_node(0, 0));
     let mut c = Counters::default();
     let grain = (n / threads.saturating_mul(8)).max(PAR_GRAIN) as u32;
-    let mut tasks = alloc::vec![Task::new([0, 0, n as u32, 1], info.bounds, info.cbounds)];
+    let mut tasks = alloc::vec![start(n, alt, info, out)];
     loop {
         let (big, done): (Vec<Task>, Vec<Task>) = tasks.into_iter().partition(|t| t.end - t.begin > grain);
         if big.is_empty() {
@@ -200,7 +198,7 @@ pub(crate) fn build_tasks_par(
         let (mut bins, mut stack) = (Bins::new(), Vec::new());
         for t in tasks {
             let defer = split_once.then(|| (&mut left, (t.end - t.begin).saturating_sub(1)));
-            subtree_impl::<true>(refs, alt, p, out, t, &mut bins, &mut stack, c, defer, 0);
+            subtree_with::<true>(refs, alt, p, out, t, &mut bins, &mut stack, c, defer, 0);
         }
         left.sort_by_key(|t| t.begin);
         return left;
@@ -257,7 +255,7 @@ pub(crate) fn build_tasks_par(
                 let first_left = ws.left.len();
                 let defer = split_once.then(|| (&mut ws.left, t.end.saturating_sub(1)));
                 let (wout, wstack) = (&mut ws.out, &mut ws.stack);
-                subtree_impl::<true>(r, a, p, wout, t, &mut bins, wstack, &mut lc, defer, slot as u32);
+                subtree_with::<true>(r, a, p, wout, t, &mut bins, wstack, &mut lc, defer, slot as u32);
                 let nodes = ws.out.nodes.len() - node;
                 if let Ok(mut g) = landed[j].lock() {
                     *g = Some(Landed {
@@ -391,32 +389,17 @@ pub(crate) fn subtree(
     stack: &mut Vec<Task>,
     c: &mut Counters,
 ) {
-    subtree_with::<true>(refs, alt, p, out, root, bins, stack, c);
+    subtree_with::<true>(refs, alt, p, out, root, bins, stack, c, None, 0);
 }
 
 /// [`subtree`]; `LOCAL_SMALL`: small ranges go to [`small::subtree`] (`false`: the task loop
 /// builds them with the same splits, node by node; kept as the reference the tests and the speed
-/// harness compare with).
+/// harness compare with). With `defer = Some((tasks, grain))`, a task of at most `grain`
+/// references is not built but pushed to `tasks` (its node is in `out`, still a placeholder):
+/// the rounds of the parallel build, which split each task once. Leaves take the slots `off`
+/// after their range (0 but in the parallel build's workers).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
-    refs: &mut [PrimRef],
-    alt: &mut [PrimRef],
-    p: &BuildParams,
-    out: &mut Bvh2,
-    root: Task,
-    bins: &mut Bins,
-    stack: &mut Vec<Task>,
-    c: &mut Counters,
-) {
-    subtree_impl::<LOCAL_SMALL>(refs, alt, p, out, root, bins, stack, c, None, 0);
-}
-
-/// [`subtree_with`]; with `defer = Some((tasks, grain))`, a task of at most `grain` references
-/// is not built but pushed to `tasks` (its node is in `out`, still a placeholder): the rounds of
-/// the parallel build, which split each task once. Leaves take the slots `off` after their range (0 but in the
-/// parallel build's workers).
-#[allow(clippy::too_many_arguments)]
-fn subtree_impl<const LOCAL_SMALL: bool>(
     refs: &mut [PrimRef],
     alt: &mut [PrimRef],
     p: &BuildParams,

@@ -54,7 +54,20 @@ fn half_area(b: &Aabb) -> f32 {
     if b.is_empty() { -1.0 } else { b.half_area() }
 }
 
-impl<L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'_, L, N, P> {
+impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
+    /// A builder with empty output arrays.
+    fn new(bvh: &'a Bvh2, tris: &'a P, counts: &'a [u32], plan: &'a Plan) -> Self {
+        Self {
+            bvh,
+            tris,
+            counts,
+            plan,
+            nodes: Vec::new(),
+            packs: Vec::new(),
+            depth: 0,
+        }
+    }
+
     /// Packs the primitives `prims` into leaf codes; more than `MAX_LEAF_PACKS * N` go below a
     /// node of their own. Returns the child code and its box.
     fn leaf(&mut self, prims: &[u32], depth: u32) -> Result<(u32, Aabb), CollapseError> {
@@ -417,21 +430,21 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
 
     fn collapse<P: Triangles + ?Sized, const GREEDY: bool>(bvh: &Bvh2, tris: &P) -> Result<Self, CollapseError> {
         let () = Self::LANES_MATCH;
-        let counts = subtree_counts(bvh)?;
+        Self::collapse_counted::<P, GREEDY>(bvh, tris, &subtree_counts(bvh)?)
+    }
+
+    /// [`collapse`](Self::collapse) with the subtree counts already made.
+    fn collapse_counted<P: Triangles + ?Sized, const GREEDY: bool>(
+        bvh: &Bvh2,
+        tris: &P,
+        counts: &[u32],
+    ) -> Result<Self, CollapseError> {
         let plan = if GREEDY {
             Plan::default()
         } else {
-            Plan::new(bvh, &counts, N)?
+            Plan::new(bvh, counts, N)?
         };
-        let mut b = Builder::<L, N, P> {
-            bvh,
-            tris,
-            counts: &counts,
-            plan: &plan,
-            nodes: Vec::new(),
-            packs: Vec::new(),
-            depth: 0,
-        };
+        let mut b = Builder::<L, N, P>::new(bvh, tris, counts, &plan);
         if !bvh.nodes.is_empty() {
             b.run(0)?;
         }
@@ -478,25 +491,17 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         let counts = subtree_counts(bvh)?;
         let total = counts.first().copied().unwrap_or(0) as usize;
         if threads == 1 || total <= 2 * PAR_GRAIN {
-            return Self::collapse::<P, false>(bvh, tris);
+            return Self::collapse_counted::<P, false>(bvh, tris, &counts);
         }
         let plan = Plan::new(bvh, &counts, N)?;
-        let builder = || Builder::<L, N, P> {
-            bvh,
-            tris,
-            counts: &counts,
-            plan: &plan,
-            nodes: Vec::new(),
-            packs: Vec::new(),
-            depth: 0,
-        };
+        let builder = || Builder::<L, N, P>::new(bvh, tris, &counts, &plan);
         // The top on this thread, down to subtrees of at most `grain` triangles.
         let grain = (total / threads.saturating_mul(8)).max(PAR_GRAIN);
         let mut top = builder();
         let mut jobs = Vec::new();
         // NOTE: on any error the sequential collapse runs instead, so that the error is the one
         // it reports (the parallel order of work could meet another error first).
-        let sequential = || Self::collapse::<P, false>(bvh, tris);
+        let sequential = || Self::collapse_counted::<P, false>(bvh, tris, &counts);
         let Ok(at) = top.new_node(1) else { return sequential() };
         if top.run_from(0, at, 1, Some((&mut jobs, grain))).is_err() {
             return sequential();
