@@ -710,3 +710,267 @@ fn zero_copy_from_bytes() {
     let e: Box<dyn std::error::Error> = Box::new(VolumeError::StaleGrid);
     assert!(e.to_string().contains("classify"));
 }
+
+// ---------------------------------------------------------------------------------------------
+// Pre-integrated transfer functions (Engel, Kraus and Ertl 2001)
+
+/// Marches with both pre-integrated kernels, checks they agree bit for bit (results and
+/// counters), returns the scalar results.
+fn both_pre<V: Voxel>(m: &PreintegratedMedium<'_, V>, rays: &[Ray], p: &MarchParams) -> (Vec<Rgba>, MarchStats) {
+    let mut a = vec![Rgba::ZERO; rays.len()];
+    let mut b = vec![Rgba { r: 9.0, ..Rgba::ZERO }; rays.len()];
+    let sa = integrate_preintegrated_scalar(m, rays, &mut a, p).unwrap();
+    let sb = integrate_preintegrated_x8(m, rays, &mut b, p).unwrap();
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(x.bit_eq(y), "ray {i}: scalar {x:?} x8 {y:?}");
+    }
+    assert_eq!(sa, sb);
+    (a, sb)
+}
+
+/// A transfer function with spikes narrower than one entry apart: zero entries, one-entry peaks
+/// of high extinction, colour changing at every entry.
+fn spiky_table(n: usize) -> Vec<TfEntry> {
+    (0..n)
+        .map(|i| {
+            let tau = match i % 6 {
+                0 | 3 => 0.0,
+                1 => 2.5,
+                2 => 0.2,
+                4 => 6.0,
+                _ => 0.7,
+            };
+            let t = i as f32 / n as f32;
+            TfEntry::new([t, (3.0 * t).sin().abs(), 1.0 - t], tau)
+        })
+        .collect()
+}
+
+/// Max's model along a path where the transfer function's value runs as `s(x)` for `x` in
+/// `[0, len]`, in `f64` by the midpoint rule with `steps` steps (second order: with the steps used
+/// here, far below the `f32` rounding the marchers are held to).
+fn max_model_f64(table: &[TfEntry], lo: f64, hi: f64, s: impl Fn(f64) -> f64, len: f64, steps: usize) -> [f64; 4] {
+    let n = table.len();
+    let at = |v: f64| {
+        let u = ((v - lo) / (hi - lo) * (n - 1) as f64).clamp(0.0, (n - 1) as f64);
+        let j = (u as usize).min(n - 2);
+        let w = u - j as f64;
+        let l = |a: f32, b: f32| a as f64 + (b as f64 - a as f64) * w;
+        let (e0, e1) = (&table[j], &table[j + 1]);
+        (l(e0.tau, e1.tau), [0, 1, 2].map(|k| l(e0.color[k], e1.color[k])))
+    };
+    let h = len / steps as f64;
+    let (mut col, mut acc) = ([0.0f64; 3], 0.0f64);
+    for k in 0..steps {
+        let (tau, c) = at(s((k as f64 + 0.5) * h));
+        let w = (1.0 - acc) * -(-tau * h).exp_m1();
+        for ch in 0..3 {
+            col[ch] += w * c[ch];
+        }
+        acc += w;
+    }
+    [col[0], col[1], col[2], acc]
+}
+
+fn err4(a: &Rgba, b: [f64; 4]) -> f64 {
+    [a.r, a.g, a.b, a.a]
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - y).abs())
+        .fold(0.0, f64::max)
+}
+
+/// The scalar runs linearly along every step and the step ends fall on table nodes: pre-integration
+/// is exact (to `f32` rounding) at a step of a whole voxel, where the midpoint rule, which samples
+/// between the spikes, is far off.
+#[test]
+fn preintegration_is_exact_for_a_linear_scalar() {
+    let n = 24u32;
+    // Voxel value i at x = i (constant in y and z): linear along x.
+    let data: Vec<f32> = (0..n * 4).map(|i| (i % n) as f32).collect();
+    let vol = Volume::new(&data, [n, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    let table = spiky_table(n as usize);
+    let tf = TransferFunction::new(&table, 0.0, (n - 1) as f32).unwrap();
+    let reference = max_model_f64(&table, 0.0, (n - 1) as f64, |x| x, (n - 1) as f64, 200_000);
+    for (dir, origin) in [
+        (Vec3::X, Vec3::new(-1.0, 0.5, 0.5)),
+        (-Vec3::X, Vec3::new(n as f32, 0.5, 0.5)),
+    ] {
+        let ray = Ray::new(origin, dir);
+        let pre = PreintegratedTable::build(&tf, 1.0, n).unwrap();
+        let m = PreintegratedMedium::new(vol, pre.view());
+        let (out, st) = both_pre(&m, &[ray], &MarchParams::reference(1.0));
+        assert_eq!(st.samples, (n - 1) as u64);
+        // Backwards the value runs from n - 1 down to 0: the reference with s(x) = n - 1 - x.
+        let want = if dir.x > 0.0 {
+            reference
+        } else {
+            max_model_f64(
+                &table,
+                0.0,
+                (n - 1) as f64,
+                |x| (n - 1) as f64 - x,
+                (n - 1) as f64,
+                200_000,
+            )
+        };
+        let e = err4(&out[0], want);
+        assert!(e < 2e-6, "pre-integrated error {e:e}: {:?} vs {want:?}", out[0]);
+        // The Riemann marcher at the same step is nowhere near.
+        let riemann = one(&VolumeMedium::new(vol, tf), ray, &MarchParams::reference(1.0));
+        let er = err4(&riemann, want);
+        println!("linear scalar, step 1 voxel, dir {dir}: pre-integrated error {e:.2e}, midpoint {er:.2e}");
+        assert!(
+            er > 1000.0 * e.max(1e-7),
+            "midpoint error {er:e} vs pre-integrated {e:e}"
+        );
+    }
+}
+
+/// A constant scalar on a table node: the closed form `A = 1 - exp(-tau L)`, `C = c A` at every
+/// step, the last (shorter) step included. (Off the nodes, the bilinear lookup blends in the
+/// neighbouring segments' means: the resolution test below.)
+#[test]
+fn preintegration_of_a_constant_field_is_exact() {
+    let table = spiky_table(12);
+    let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    let data = [0.4f32; 27];
+    let vol = Volume::new(&data, [3, 3, 3], Vec3::splat(0.5), Vec3::ZERO).unwrap();
+    let (tau, c) = tf.lookup_scalar(0.4);
+    let ray = Ray::new(Vec3::new(0.3, 0.6, -1.0), Vec3::Z);
+    let a = -(-(tau as f64)).exp_m1(); // length 1
+    let want = [c[0] as f64 * a, c[1] as f64 * a, c[2] as f64 * a, a];
+    for step in [0.07f32, 0.3, 0.5, 1.0, 2.5] {
+        // 0.4 is node 2 of 6, 4 of 11 and 20 of 51.
+        for res in [6u32, 11, 51] {
+            let pre = PreintegratedTable::build(&tf, step, res).unwrap();
+            let m = PreintegratedMedium::new(vol, pre.view());
+            let (out, _) = both_pre(&m, &[ray], &MarchParams::reference(step));
+            let e = err4(&out[0], want);
+            assert!(e < 2e-6, "step {step} res {res}: error {e:e}");
+        }
+    }
+}
+
+/// Where the step ends fall between table nodes the table's bilinear interpolation adds an error,
+/// which falls as the resolution grows.
+#[test]
+fn preintegration_error_falls_with_the_table_resolution() {
+    let n = 32u32;
+    // s = 0.37 x + 0.11 (voxel units), over a transfer function on [0, 12].
+    let data: Vec<f32> = (0..n * 4).map(|i| 0.37 * (i % n) as f32 + 0.11).collect();
+    let vol = Volume::new(&data, [n, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    let table = spiky_table(13);
+    let tf = TransferFunction::new(&table, 0.0, 12.0).unwrap();
+    let want = max_model_f64(&table, 0.0, 12.0, |x| 0.37 * x + 0.11, (n - 1) as f64, 100_000);
+    let ray = Ray::new(Vec3::new(-1.0, 0.5, 0.5), Vec3::X);
+    let step = 1.5f32;
+    let errs: Vec<f64> = [16u32, 64, 256]
+        .iter()
+        .map(|&res| {
+            let pre = PreintegratedTable::build(&tf, step, res).unwrap();
+            let m = PreintegratedMedium::new(vol, pre.view());
+            err4(&both_pre(&m, &[ray], &MarchParams::reference(step)).0[0], want)
+        })
+        .collect();
+    println!(
+        "off-node linear scalar, step 1.5: errors at res 16/64/256 {:.2e} {:.2e} {:.2e}",
+        errs[0], errs[1], errs[2]
+    );
+    assert!(errs[2] < errs[1] && errs[1] < errs[0], "{errs:?}");
+    assert!(errs[2] < 2e-3, "{errs:?}");
+    let riemann = one(&VolumeMedium::new(vol, tf), ray, &MarchParams::reference(step));
+    println!("  midpoint at the same step: {:.2e}", err4(&riemann, want));
+    assert!(
+        err4(&riemann, want) > 5.0 * errs[2],
+        "{errs:?} vs midpoint {:e}",
+        err4(&riemann, want)
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// x8 equals scalar bit for bit on random volumes, transfer functions, table resolutions,
+    /// rays (including special values) and parameters; opacity stays in [0, 1].
+    #[test]
+    fn preintegrated_x8_equals_scalar((data, dims, table, rays, p, block) in arb_case()) {
+        let vol = Volume::new(&data, dims, Vec3::new(0.5, 0.25, 0.75), Vec3::new(0.1, -0.2, 0.3)).unwrap();
+        let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+        let pre = PreintegratedTable::build(&tf, p.step, 2 + 7 * block).unwrap();
+        let (out, _) = both_pre(&PreintegratedMedium::new(vol, pre.view()), &rays, &p);
+        for x in &out {
+            prop_assert!((0.0..=1.0).contains(&x.a) && x.r.is_finite() && x.g.is_finite() && x.b.is_finite(), "{:?}", x);
+        }
+    }
+}
+
+#[test]
+fn preintegrated_bad_input() {
+    let data = [100u8; 64];
+    let vol = unit_volume(&data, 4);
+    let table = [TfEntry::new([1.0; 3], 0.5), TfEntry::new([1.0; 3], 4.0)];
+    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    for step in [0.0, -0.0, -0.1, f32::NAN, f32::INFINITY] {
+        assert_eq!(
+            PreintegratedTable::build(&tf, step, 8).unwrap_err(),
+            VolumeError::InvalidStep
+        );
+    }
+    let pre = PreintegratedTable::build(&tf, 0.1, 8).unwrap();
+    let m = PreintegratedMedium::new(vol, pre.view());
+    let rays = [down_z(0.5, 0.5)];
+    let mut out = [Rgba { r: 7.0, ..Rgba::ZERO }];
+    for (p, e) in [
+        (MarchParams::reference(0.0), VolumeError::InvalidStep),
+        (MarchParams::reference(f32::NAN), VolumeError::InvalidStep),
+        (MarchParams::reference(0.2), VolumeError::StepMismatch),
+        (
+            MarchParams::reference(f32::from_bits(0.1f32.to_bits() + 1)),
+            VolumeError::StepMismatch,
+        ),
+    ] {
+        assert_eq!(integrate_preintegrated_scalar(&m, &rays, &mut out, &p), Err(e));
+        assert_eq!(integrate_preintegrated_x8(&m, &rays, &mut out, &p), Err(e));
+        assert_eq!(out[0].r, 7.0, "nothing written on error");
+    }
+    assert!(VolumeError::StepMismatch.to_string().contains("step"));
+    assert_eq!(
+        integrate_preintegrated(&m, &[rays[0]; 2], &mut out, &MarchParams::reference(0.1)),
+        Err(VolumeError::LengthMismatch { rays: 2, out: 1 })
+    );
+    // Degenerate, missing and non-finite rays: transparent; a tiny step: capped work.
+    let o = Vec3::new(0.5, 0.5, -1.0);
+    let odd = [
+        Ray::with_range(Vec3::splat(0.5), Vec3::Z, 0.2, 0.2),
+        Ray::new(o, Vec3::ZERO),
+        Ray::new(Vec3::new(f32::NAN, 0.5, -1.0), Vec3::Z),
+        Ray::new(o, Vec3::new(0.0, f32::INFINITY, 1.0)),
+        Ray::new(Vec3::new(2.0, 0.5, -1.0), Vec3::Z),
+    ];
+    let (out, st) = both_pre(&m, &odd, &MarchParams::reference(0.1));
+    assert!(out.iter().all(|p| p.bit_eq(&Rgba::ZERO)) && st.samples == 0);
+    let tiny = PreintegratedTable::build(&tf, 1e-9, 4).unwrap();
+    let capped = PreintegratedMedium::new(vol, tiny.view());
+    let (out, st) = both_pre(&capped, &[down_z(0.5, 0.5)], &MarchParams::reference(1e-9));
+    assert_eq!((st.samples, st.truncated), (DEFAULT_MAX_STEPS as u64, 1));
+    assert!(out[0].a > 0.0);
+    // An empty volume and an all-zero opacity: transparent.
+    let empty = Volume::<u8>::new(&[], [0, 3, 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    let (out, _) = both_pre(
+        &PreintegratedMedium::new(empty, pre.view()),
+        &test_rays(20),
+        &MarchParams::reference(0.1),
+    );
+    assert!(out.iter().all(|p| p.bit_eq(&Rgba::ZERO)));
+    let clear = [TfEntry::new([1.0, 0.0, 0.0], 0.0); 4];
+    let tf0 = TransferFunction::new(&clear, 0.0, 255.0).unwrap();
+    let pre0 = PreintegratedTable::build(&tf0, 0.05, 16).unwrap();
+    let ball_data = ball(16, 0.4);
+    let (out, st) = both_pre(
+        &PreintegratedMedium::new(unit_volume(&ball_data, 16), pre0.view()),
+        &test_rays(50),
+        &MarchParams::reference(0.05),
+    );
+    assert!(out.iter().all(|p| p.bit_eq(&Rgba::ZERO)) && st.samples > 0);
+}

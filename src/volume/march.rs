@@ -2,7 +2,8 @@
 
 use super::exp::{one_minus_exp_neg_scalar, one_minus_exp_neg_x8};
 use super::medium::{EmptyRegion, Lookup, Medium};
-use super::{Rgba, VolumeError};
+use super::preint::PreintegratedMedium;
+use super::{Rgba, VolumeError, Voxel};
 use crate::geometry::{Aabb, Ray};
 use crate::math::{Lane, abs, f32x8, max_l, min_l, sign_bit};
 use glam::Vec3;
@@ -151,9 +152,20 @@ struct Ctx {
 
 impl Ctx {
     fn new<M: Medium>(m: &M, p: &MarchParams) -> Result<Self, VolumeError> {
+        Self::with_frame(m.bounds(), m.local_frame(), p)
+    }
+
+    /// For the pre-integrated marchers: also checks that the table is for this step.
+    fn preintegrated<V: Voxel>(m: &PreintegratedMedium<'_, V>, p: &MarchParams) -> Result<Self, VolumeError> {
+        let ctx = Self::with_frame(m.bounds(), m.volume().local_frame(), p)?;
+        if m.table().step().to_bits() != p.step.to_bits() {
+            return Err(VolumeError::StepMismatch);
+        }
+        Ok(ctx)
+    }
+
+    fn with_frame(bounds: Aabb, (origin, scale): (Vec3, Vec3), p: &MarchParams) -> Result<Self, VolumeError> {
         p.validate()?;
-        let bounds = m.bounds();
-        let (origin, scale) = m.local_frame();
         let diag = if bounds.is_empty() {
             0.0
         } else {
@@ -249,6 +261,22 @@ impl Ctx {
         )
     }
 
+    /// Local position of the end of step `k` (where the next one starts) and the step's length.
+    #[inline(always)]
+    fn end_position(&self, sp: &Span, k: u32) -> ([f32; 3], f32) {
+        let s0 = k as f32 * self.dt;
+        let h = max_l(min_l(self.dt, sp.len - s0), 0.0);
+        let s = s0 + h;
+        (
+            [
+                sp.ge[0] + sp.gd[0] * s,
+                sp.ge[1] + sp.gd[1] * s,
+                sp.ge[2] + sp.gd[2] * s,
+            ],
+            h,
+        )
+    }
+
     /// Sample `k`, at local position `g`, lies in the empty region `r`: the next step index to
     /// look at. Jumps to the first lattice sample past `r.exit` if the last sample jumped over
     /// lies in `r.safe` (then all do: positions are monotone in `k`), else just past `k`.
@@ -298,6 +326,35 @@ impl Ctx {
     }
 }
 
+/// One step front to back: `a = 1 - exp(-tau h)`; `C += (1 - A) a c`; `A += (1 - A) a`.
+#[inline(always)]
+fn composite_scalar(tau: f32, color: [f32; 3], h: f32, col: &mut [f32; 3], acc: &mut f32) {
+    let a = one_minus_exp_neg_scalar(tau * h);
+    let w = (1.0 - *acc) * a;
+    for (c, sc) in col.iter_mut().zip(color) {
+        *c += w * sc;
+    }
+    *acc += w;
+}
+
+/// [`composite_scalar`] in the `live` lanes of `v`.
+#[inline(always)]
+fn composite_x8(live: f32x8, tau: f32x8, color: [f32x8; 3], h: f32x8, v: &mut LaneVecs) {
+    let a = one_minus_exp_neg_x8(tau * h);
+    let w = (f32x8::splat(1.0) - v.acc) * a;
+    for (c, sc) in v.col.iter_mut().zip(color) {
+        *c = live.select(*c + w * sc, *c);
+    }
+    v.acc = live.select(v.acc + w, v.acc);
+}
+
+/// `true` once `acc` has reached the termination threshold: the same predicate as the x8
+/// lanes' `acc.lt(thr)`, negated (not `acc >= thr` written as such).
+#[inline(always)]
+fn reached(acc: f32, thr: f32) -> bool {
+    acc.partial_cmp(&thr) != Some(core::cmp::Ordering::Less)
+}
+
 /// The scalar reference for one ray.
 #[inline]
 fn march_scalar<M: Medium>(m: &M, ctx: &Ctx, sp: &Span, stats: &mut MarchStats) -> Rgba {
@@ -313,17 +370,10 @@ fn march_scalar<M: Medium>(m: &M, ctx: &Ctx, sp: &Span, stats: &mut MarchStats) 
                 k = kn;
             }
             Lookup::Sample(s) => {
-                // Front to back: a = 1 - exp(-tau h); C += (1 - A) a c; A += (1 - A) a.
-                let a = one_minus_exp_neg_scalar(s.tau * h);
-                let w = (1.0 - acc) * a;
-                for (c, sc) in col.iter_mut().zip(s.color) {
-                    *c += w * sc;
-                }
-                acc += w;
+                composite_scalar(s.tau, s.color, h, &mut col, &mut acc);
                 stats.samples += 1;
                 k += 1;
-                // Not `acc >= thr` written as such: the same predicate as the x8 lanes' `lt`.
-                if acc.partial_cmp(&ctx.thr) != Some(core::cmp::Ordering::Less) {
+                if reached(acc, ctx.thr) {
                     stats.terminated += (k < sp.n) as u64;
                     break;
                 }
@@ -583,12 +633,7 @@ pub fn integrate_x8<M: Medium>(
                 v = ln.v;
             }
             Ok(smp) => {
-                let a = one_minus_exp_neg_x8(smp.tau * h);
-                let w = (one - v.acc) * a;
-                for c in 0..3 {
-                    v.col[c] = live.select(v.col[c] + w * smp.color[c], v.col[c]);
-                }
-                v.acc = live.select(v.acc + w, v.acc);
+                composite_x8(live, smp.tau, smp.color, h, &mut v);
                 // Every lane with a ray is live here (finished ones were refilled at once), so k
                 // steps unconditionally: the next positions do not wait for this step's opacity.
                 v.k += one;
@@ -619,4 +664,192 @@ pub fn integrate<M: Medium>(
     params: &MarchParams,
 ) -> Result<MarchStats, VolumeError> {
     integrate_x8(m, rays, out, params)
+}
+
+/// The pre-integrated scalar reference for one ray: the scalar at each step's ends, the step's
+/// contribution from the table.
+#[inline]
+fn march_preintegrated_scalar<V: Voxel>(
+    m: &PreintegratedMedium<'_, V>,
+    ctx: &Ctx,
+    sp: &Span,
+    stats: &mut MarchStats,
+) -> Rgba {
+    let (mut col, mut acc) = ([0.0f32; 3], 0.0f32);
+    let mut front = m.scalar(sp.ge);
+    let mut k = 0u32;
+    while k < sp.n {
+        let (g, h) = ctx.end_position(sp, k);
+        let back = m.scalar(g);
+        let (tau, color) = m.table().lookup_scalar(front, back);
+        front = back;
+        composite_scalar(tau, color, h, &mut col, &mut acc);
+        stats.samples += 1;
+        k += 1;
+        if reached(acc, ctx.thr) {
+            stats.terminated += (k < sp.n) as u64;
+            break;
+        }
+    }
+    Rgba {
+        r: col[0],
+        g: col[1],
+        b: col[2],
+        a: acc,
+    }
+}
+
+/// Scalar reference of pre-integrated marching ([`preint`](super::preint)): `rays[i]` into
+/// `out[i]`, one ray at a time. Each step of length `h` from `t_k = k dt` samples the scalar at
+/// its end (its start is the previous step's end; the first step samples the entry point too) and
+/// composites the table's entry for the pair as the Riemann marcher composites a sample. The
+/// lattice, the clipping, termination, `max_steps` and the counters are
+/// [`integrate_scalar`]'s (`samples` counts steps); [`MarchParams::sampling`] is not used.
+///
+/// Errors: as [`integrate_scalar`], and [`VolumeError::StepMismatch`] unless `params.step` is
+/// the table's step.
+pub fn integrate_preintegrated_scalar<V: Voxel>(
+    m: &PreintegratedMedium<'_, V>,
+    rays: &[Ray],
+    out: &mut [Rgba],
+    params: &MarchParams,
+) -> Result<MarchStats, VolumeError> {
+    let ctx = Ctx::preintegrated(m, params)?;
+    if out.len() < rays.len() {
+        return Err(VolumeError::LengthMismatch {
+            rays: rays.len(),
+            out: out.len(),
+        });
+    }
+    let mut stats = MarchStats::default();
+    for (ray, o) in rays.iter().zip(out.iter_mut()) {
+        *o = match ctx.span(ray) {
+            Some(sp) => {
+                stats.rays += 1;
+                stats.truncated += sp.truncated as u64;
+                march_preintegrated_scalar(m, &ctx, &sp, &mut stats)
+            }
+            None => Rgba::ZERO,
+        };
+    }
+    Ok(stats)
+}
+
+/// Pre-integrated marching eight rays at a time, as [`integrate_x8`] marches: every result equals
+/// [`integrate_preintegrated_scalar`]'s bit for bit, and so do the counters. Errors as
+/// [`integrate_preintegrated_scalar`].
+///
+/// ```
+/// use strahl::{Ray, Vec3};
+/// use strahl::volume::*;
+/// let data: Vec<u8> = (0..16 * 16 * 16).map(|i| (i * 37 % 251) as u8).collect();
+/// let vol = Volume::new(&data, [16; 3], Vec3::splat(0.25), Vec3::ZERO).unwrap();
+/// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.2], 6.0), TfEntry::new([0.2, 0.5, 1.0], 1.0)];
+/// let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+/// let pre = PreintegratedTable::build(&tf, 0.1, 32).unwrap();
+/// let m = PreintegratedMedium::new(vol, pre.view());
+/// let rays: Vec<Ray> = (0..20)
+///     .map(|i| Ray::new(Vec3::new(0.1 + 0.17 * i as f32, 1.9, -1.0), Vec3::new(0.0, -0.3, 1.0)))
+///     .collect();
+/// let (mut a, mut b) = (vec![Rgba::ZERO; 20], vec![Rgba::ZERO; 20]);
+/// let p = MarchParams::fast(0.1);
+/// let sa = integrate_preintegrated_scalar(&m, &rays, &mut a, &p).unwrap();
+/// let sb = integrate_preintegrated_x8(&m, &rays, &mut b, &p).unwrap();
+/// assert!(a.iter().zip(&b).all(|(x, y)| x.bit_eq(y)));
+/// assert_eq!(sa, sb);
+/// // The table is for one step only.
+/// let e = integrate_preintegrated_x8(&m, &rays, &mut b, &MarchParams::fast(0.2)).unwrap_err();
+/// assert!(matches!(e, VolumeError::StepMismatch { .. }));
+/// ```
+pub fn integrate_preintegrated_x8<V: Voxel>(
+    m: &PreintegratedMedium<'_, V>,
+    rays: &[Ray],
+    out: &mut [Rgba],
+    params: &MarchParams,
+) -> Result<MarchStats, VolumeError> {
+    let ctx = Ctx::preintegrated(m, params)?;
+    if out.len() < rays.len() {
+        return Err(VolumeError::LengthMismatch {
+            rays: rays.len(),
+            out: out.len(),
+        });
+    }
+    let mut stats = MarchStats::default();
+    let z = f32x8::splat(0.0);
+    let mut ln = Lanes {
+        ray: [usize::MAX; 8],
+        span: [Span::default(); 8],
+        v: LaneVecs {
+            ge: [z; 3],
+            gd: [z; 3],
+            len: z,
+            n: z,
+            k: z,
+            col: [z; 3],
+            acc: z,
+        },
+    };
+    // The scalar at each lane's current step start.
+    let mut front = [0.0f32; 8];
+    let mut next = 0usize;
+    for (l, f) in front.iter_mut().enumerate() {
+        ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
+        *f = m.scalar(ln.span[l].ge);
+    }
+    let mut front = f32x8::new(front);
+    let dt = f32x8::splat(ctx.dt);
+    let thr = f32x8::splat(ctx.thr);
+    let (zero, one) = (f32x8::splat(0.0), f32x8::splat(1.0));
+    let ahead = f32x8::splat(ctx.dt * PREFETCH_STEPS);
+    let mut prefetch_now = false;
+    let mut v = ln.v;
+    loop {
+        let live = v.k.lt(v.n) & v.acc.lt(thr);
+        let active = live.bitmask();
+        if active == 0 {
+            break;
+        }
+        // The step's end, as `Ctx::end_position` per lane.
+        let s0 = v.k * dt;
+        let h = dt.min_l(v.len - s0).max_l(zero);
+        let s = s0 + h;
+        let g = [v.ge[0] + v.gd[0] * s, v.ge[1] + v.gd[1] * s, v.ge[2] + v.gd[2] * s];
+        // PERF: as integrate_x8's prefetch.
+        prefetch_now = !prefetch_now;
+        if prefetch_now {
+            let sp = s + ahead;
+            m.volume()
+                .prefetch_x8([v.ge[0] + v.gd[0] * sp, v.ge[1] + v.gd[1] * sp, v.ge[2] + v.gd[2] * sp]);
+        }
+        let back = m.volume().sample_local_x8(g);
+        let (tau, color) = m.table().lookup_x8(front, back);
+        front = back;
+        composite_x8(live, tau, color, h, &mut v);
+        v.k += one;
+        stats.samples += active.count_ones() as u64;
+        let done = active & !(v.k.lt(v.n) & v.acc.lt(thr)).bitmask();
+        if done != 0 {
+            ln.v = v;
+            let mut bits = done;
+            while bits != 0 {
+                let l = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
+                set_lane(&mut front, l, m.scalar(ln.span[l].ge));
+            }
+            v = ln.v;
+        }
+    }
+    Ok(stats)
+}
+
+/// Pre-integrated marching with the fastest kernel, [`integrate_preintegrated_x8`].
+#[inline]
+pub fn integrate_preintegrated<V: Voxel>(
+    m: &PreintegratedMedium<'_, V>,
+    rays: &[Ray],
+    out: &mut [Rgba],
+    params: &MarchParams,
+) -> Result<MarchStats, VolumeError> {
+    integrate_preintegrated_x8(m, rays, out, params)
 }

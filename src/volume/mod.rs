@@ -109,6 +109,7 @@ mod exp;
 mod grid;
 mod march;
 mod medium;
+pub mod preint;
 #[cfg(feature = "alloc")]
 pub mod procedural;
 pub mod skip;
@@ -117,10 +118,11 @@ mod transfer;
 pub use exp::{ONE_MINUS_EXP_NEG_MAX_EPS, one_minus_exp_neg_scalar, one_minus_exp_neg_x8};
 pub use grid::{Volume, Voxel};
 pub use march::{
-    DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT, MarchParams, MarchStats, Sampling, integrate, integrate_ray, integrate_scalar,
-    integrate_x8,
+    DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT, MarchParams, MarchStats, Sampling, integrate, integrate_preintegrated,
+    integrate_preintegrated_scalar, integrate_preintegrated_x8, integrate_ray, integrate_scalar, integrate_x8,
 };
 pub use medium::{EmptyRegion, Lookup, Medium, Sample, SampleX8, VolumeMedium};
+pub use preint::{PREINTEGRATED_MAX_RES, PreintegratedMedium, PreintegratedTable};
 pub use skip::{GridParams, MAX_EMPTY_RADIUS, Macrocell, MacrocellGrid};
 pub use transfer::{COLOR_MAX, TAU_MAX, TfEntry, TransferFunction, correct_opacity};
 
@@ -232,6 +234,11 @@ pub enum VolumeError {
     /// A macrocell grid not classified, or classified with a transfer function whose transparent
     /// entries or value range differ from the one in use: call [`MacrocellGrid::classify`] again.
     StaleGrid,
+    /// A pre-integrated table's resolution outside `2..=`[`PREINTEGRATED_MAX_RES`].
+    InvalidResolution,
+    /// A pre-integrated table built for another step than [`MarchParams::step`]: build it for
+    /// that step ([`PreintegratedTable::build`]).
+    StepMismatch,
     /// The output slice is shorter than the ray slice.
     LengthMismatch {
         /// Number of rays.
@@ -272,6 +279,16 @@ impl fmt::Display for VolumeError {
             Self::StaleGrid => write!(
                 f,
                 "macrocell grid is not classified for this transfer function: call classify again"
+            ),
+            Self::InvalidResolution => {
+                write!(
+                    f,
+                    "pre-integrated table resolution must lie in 2..={PREINTEGRATED_MAX_RES}"
+                )
+            }
+            Self::StepMismatch => write!(
+                f,
+                "pre-integrated table was built for another step than the marching step: build it for that step"
             ),
             Self::LengthMismatch { rays, out } => {
                 write!(f, "{rays} rays but room for {out} results")
