@@ -1,16 +1,20 @@
 //! Volume ray marching benchmarks (single thread). Each comparison first checks the images:
 //!
 //! - `volume_x8_vs_scalar`: the scalar reference against the 8-wide marcher on a dense
-//!   Marschner-Lobb volume (`128^3` u8, no empty space); bit-identical images asserted.
+//!   Marschner-Lobb volume (`128^3` as u8, u16 and f32, no empty space), Riemann and pre-integrated
+//!   (table of `256^2`); bit-identical images asserted.
+//! - `volume_preintegration_build`: building pre-integrated tables of `64^2` to `256^2` from a
+//!   256-entry transfer function (a smooth ramp and two thin bands).
 //! - `volume_skipping`: x8 with and without the macrocell grid on a torus volume that is about
 //!   97% empty (`128^3` u8); bit-identical images asserted, empty fractions printed.
 //! - `volume_termination`: x8 without termination, with exact termination (`Some(0)`) and with
 //!   `Some(1/256)` on an opaque volume; the first two bit-identical, the third within
 //!   `eps max|c|`.
-//! - The run-time-against-error sweep: RMS error of the image against a reference marched at
-//!   1/64 voxel, against nanoseconds per ray, for endpoint and midpoint sampling over steps of 2
-//!   to 1/16 voxel. Printed as a table before the timings and plotted to
-//!   `out/volume_time_vs_error.svg`.
+//! - The run-time-against-error sweeps, for a smooth ramp and for two thin bands as transfer
+//!   function: RMS error of the image against a reference marched at 1/256 voxel (midpoint),
+//!   against nanoseconds per ray, for endpoint, midpoint and pre-integrated marching over steps of
+//!   2 to 1/16 voxel. Printed as tables before the timings and plotted to
+//!   `out/volume_time_vs_error.svg` (ramp) and `out/volume_time_vs_error_band.svg` (bands).
 //!
 //! `cargo bench --bench volume -- --warm-up-time 1 --measurement-time 3`
 
@@ -99,6 +103,37 @@ fn x8_vs_scalar_one<V: Voxel>(
     g.bench_function(format!("{ty}/x8"), |bch| {
         bch.iter(|| integrate_x8(&m, black_box(rays), &mut out, &p).unwrap())
     });
+    // Pre-integrated at the same step (table of 256^2, built outside the timing).
+    let pre = PreintegratedTable::build(&tf, p.step, 256).unwrap();
+    let pm = PreintegratedMedium::new(vol, pre.view());
+    let (c, sc) = march(|r, o| integrate_preintegrated_scalar(&pm, r, o, &p).unwrap(), rays);
+    let (d, sd) = march(|r, o| integrate_preintegrated_x8(&pm, r, o, &p).unwrap(), rays);
+    assert!(identical(&c, &d), "pre-integrated x8 differs from scalar ({ty})");
+    assert_eq!(sc, sd);
+    g.bench_function(format!("{ty}/preintegrated_scalar"), |bch| {
+        bch.iter(|| integrate_preintegrated_scalar(&pm, black_box(rays), &mut out, &p).unwrap())
+    });
+    g.bench_function(format!("{ty}/preintegrated_x8"), |bch| {
+        bch.iter(|| integrate_preintegrated_x8(&pm, black_box(rays), &mut out, &p).unwrap())
+    });
+}
+
+/// Building pre-integrated tables from a 256-entry transfer function, at three resolutions.
+fn preintegration_build(c: &mut Criterion) {
+    let mut g = c.benchmark_group("volume_preintegration_build");
+    g.sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(3));
+    for (name, table) in [("ramp", ramp(0, 255, 3.0)), ("band", band())] {
+        let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+        for res in [64u32, 128, 256] {
+            g.throughput(Throughput::Elements(res as u64 * res as u64));
+            g.bench_function(format!("{name}/{res}"), |bch| {
+                bch.iter(|| PreintegratedTable::build(&tf, black_box(1.0 / 63.0), res).unwrap())
+            });
+        }
+    }
+    g.finish();
 }
 
 fn skipping(c: &mut Criterion) {
@@ -210,58 +245,115 @@ fn rms(a: &[Rgba], b: &[Rgba]) -> f64 {
     (s / (4 * a.len()) as f64).sqrt()
 }
 
+/// 256 entries over `[0, 1]`: clear but for two thin bands, as iso-surfaces are drawn: 3 entries
+/// (1% of the range) around 0.55, orange and dense, and 2 around 0.31, blue and lighter.
+fn band() -> Vec<TfEntry> {
+    (0..256)
+        .map(|i| match i {
+            139..=141 => TfEntry::new([1.0, 0.55, 0.1], if i == 140 { 80.0 } else { 40.0 }),
+            79..=80 => TfEntry::new([0.2, 0.4, 1.0], 25.0),
+            _ => TfEntry::TRANSPARENT,
+        })
+        .collect()
+}
+
+/// How a sweep point was marched.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Method {
+    Endpoint,
+    Midpoint,
+    /// Pre-integrated, table of 256^2.
+    Preintegrated,
+}
+
 fn sweep(_c: &mut Criterion) {
+    for (name, table, path) in [
+        ("ramp", ramp(0, 255, 3.0), "out/volume_time_vs_error.svg"),
+        ("band", band(), "out/volume_time_vs_error_band.svg"),
+    ] {
+        sweep_one(name, &table, path);
+    }
+}
+
+/// The step-size sweep over one transfer function: a table (printed) and a plot.
+fn sweep_one(name: &str, table: &[TfEntry], path: &str) {
     let n = 64;
     let data = marschner_lobb(n);
     let vol = unit_volume(&data, n).unwrap();
-    let table: Vec<TfEntry> = ramp(0, 255, 3.0);
-    let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    let tf = TransferFunction::new(table, 0.0, 1.0).unwrap();
     let m = VolumeMedium::new(vol, tf);
     let rays = pinhole_rays(Vec3::new(2.2, -2.9, 1.6), Vec3::ZERO, 36.0, 64, 64);
     let voxel = vol.spacing().x;
     let mut reference = vec![Rgba::ZERO; rays.len()];
-    integrate_x8(&m, &rays, &mut reference, &MarchParams::reference(voxel / 64.0)).unwrap();
+    integrate_x8(
+        &m,
+        &rays,
+        &mut reference,
+        &MarchParams {
+            max_steps: MAX_STEPS_LIMIT,
+            ..MarchParams::reference(voxel / 256.0)
+        },
+    )
+    .unwrap();
     println!(
-        "\nstep-size sweep: Marschner-Lobb {n}^3 f32, {} rays, x8, error against 1/64-voxel midpoint reference",
+        "\nstep-size sweep ({name} transfer function): Marschner-Lobb {n}^3 f32, {} rays, x8, error against a 1/256-voxel midpoint reference",
         rays.len()
     );
-    println!("| sampling | step (voxels) | samples/ray | ns/ray | RMS error |");
+    println!("| method | step (voxels) | samples/ray | ns/ray | RMS error |");
     println!("|---|---|---|---|---|");
-    let mut pts: Vec<(Sampling, f64, f64, f64)> = vec![];
-    for sampling in [Sampling::Endpoint, Sampling::Midpoint] {
+    let mut pts: Vec<(Method, f64, f64, f64)> = vec![];
+    for method in [Method::Endpoint, Method::Midpoint, Method::Preintegrated] {
         for k in -1..=4 {
             let frac = 0.5f32.powi(k);
+            let sampling = if method == Method::Endpoint {
+                Sampling::Endpoint
+            } else {
+                Sampling::Midpoint
+            };
             let p = MarchParams {
                 sampling,
                 ..MarchParams::reference(voxel * frac)
             };
             let mut out = vec![Rgba::ZERO; rays.len()];
-            let st = integrate_x8(&m, &rays, &mut out, &p).unwrap();
-            let ns = ns_per_ray(rays.len(), 5, || {
-                integrate_x8(&m, &rays, &mut out, &p).unwrap();
-            });
+            let (st, ns, build) = if method == Method::Preintegrated {
+                let t = Instant::now();
+                let pre = PreintegratedTable::build(&tf, p.step, 256).unwrap();
+                let build = t.elapsed().as_secs_f64() * 1e3;
+                let pm = PreintegratedMedium::new(vol, pre.view());
+                let st = integrate_preintegrated_x8(&pm, &rays, &mut out, &p).unwrap();
+                let ns = ns_per_ray(rays.len(), 5, || {
+                    integrate_preintegrated_x8(&pm, &rays, &mut out, &p).unwrap();
+                });
+                (st, ns, Some(build))
+            } else {
+                let st = integrate_x8(&m, &rays, &mut out, &p).unwrap();
+                let ns = ns_per_ray(rays.len(), 5, || {
+                    integrate_x8(&m, &rays, &mut out, &p).unwrap();
+                });
+                (st, ns, None)
+            };
             let e = rms(&out, &reference);
+            let note = build.map_or(String::new(), |ms| format!(" (table {ms:.0} ms)"));
             println!(
-                "| {sampling:?} | {frac} | {:.0} | {ns:.0} | {e:.3e} |",
+                "| {method:?}{note} | {frac} | {:.0} | {ns:.0} | {e:.3e} |",
                 st.samples as f64 / st.rays as f64
             );
-            pts.push((sampling, frac as f64, ns, e));
+            pts.push((method, frac as f64, ns, e));
         }
         // Observed order from the three finest steps.
-        let s: Vec<_> = pts.iter().filter(|p| p.0 == sampling).rev().take(3).collect();
+        let s: Vec<_> = pts.iter().filter(|p| p.0 == method).rev().take(3).collect();
         let order = (s[2].3 / s[0].3).ln() / (s[2].1 / s[0].1).ln();
-        println!("| {sampling:?} | observed order (finest 3 steps) | | | {order:.2} |");
+        println!("| {method:?} | observed order (finest 3 steps) | | | {order:.2} |");
     }
     std::fs::create_dir_all("out").ok();
-    let path = "out/volume_time_vs_error.svg";
-    match plot(path, &pts) {
+    match plot(path, name, &pts) {
         Ok(()) => println!("wrote {path}\n"),
         Err(e) => println!("could not write {path}: {e}\n"),
     }
 }
 
-/// Log-log plot: ns per ray (x) against RMS error (y), one line per sampling rule.
-fn plot(path: &str, pts: &[(Sampling, f64, f64, f64)]) -> Result<(), Box<dyn std::error::Error>> {
+/// Log-log plot: ns per ray (x) against RMS error (y), one line per method.
+fn plot(path: &str, name: &str, pts: &[(Method, f64, f64, f64)]) -> Result<(), Box<dyn std::error::Error>> {
     let root = SVGBackend::new(path, (720, 460)).into_drawing_area();
     root.fill(&WHITE)?;
     let (x0, x1) = pts
@@ -272,7 +364,7 @@ fn plot(path: &str, pts: &[(Sampling, f64, f64, f64)]) -> Result<(), Box<dyn std
         .fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.3), b.max(p.3)));
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "volume marching: time per ray against RMS error (Marschner-Lobb 64^3)",
+            format!("volume marching: time per ray against RMS error (Marschner-Lobb 64^3, {name} TF)"),
             ("sans-serif", 16),
         )
         .margin(12)
@@ -285,14 +377,18 @@ fn plot(path: &str, pts: &[(Sampling, f64, f64, f64)]) -> Result<(), Box<dyn std
         .y_desc("RMS error of premultiplied RGBA")
         .y_label_formatter(&|v| format!("{v:.0e}"))
         .draw()?;
-    for (sampling, color) in [(Sampling::Endpoint, RED), (Sampling::Midpoint, BLUE)] {
-        let s: Vec<(f64, f64)> = pts.iter().filter(|p| p.0 == sampling).map(|p| (p.2, p.3)).collect();
+    for (method, color) in [
+        (Method::Endpoint, RED),
+        (Method::Midpoint, BLUE),
+        (Method::Preintegrated, GREEN),
+    ] {
+        let s: Vec<(f64, f64)> = pts.iter().filter(|p| p.0 == method).map(|p| (p.2, p.3)).collect();
         chart
             .draw_series(LineSeries::new(s.clone(), color.stroke_width(2)))?
-            .label(format!("{sampling:?}"))
+            .label(format!("{method:?}"))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2)));
         chart.draw_series(s.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
-        for p in pts.iter().filter(|p| p.0 == sampling) {
+        for p in pts.iter().filter(|p| p.0 == method) {
             chart.draw_series(std::iter::once(Text::new(
                 format!("{} vox", p.1),
                 (p.2 * 1.04, p.3 * 1.15),
@@ -309,5 +405,12 @@ fn plot(path: &str, pts: &[(Sampling, f64, f64, f64)]) -> Result<(), Box<dyn std
     Ok(())
 }
 
-criterion_group!(benches, sweep, x8_vs_scalar, skipping, termination);
+criterion_group!(
+    benches,
+    sweep,
+    x8_vs_scalar,
+    preintegration_build,
+    skipping,
+    termination
+);
 criterion_main!(benches);

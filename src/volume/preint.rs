@@ -306,26 +306,28 @@ struct Tf64<'a> {
     h: f64,
 }
 
+/// `(tau, c)` of one point of the transfer function, in `f64`.
+type Point = (f64, [f64; 3]);
+
 impl<'a> Tf64<'a> {
     fn new(tf: &TransferFunction<'a>) -> Self {
         let e = tf.entries();
         let (lo, hi) = tf.range();
-        let h = if e.len() > 1 {
-            (hi as f64 - lo as f64) / (e.len() - 1) as f64
-        } else {
-            0.0
-        };
+        let h = if e.len() > 1 { (hi as f64 - lo as f64) / (e.len() - 1) as f64 } else { 0.0 };
         Self { e, lo: lo as f64, h }
     }
 
-    /// `(tau, c)` at scalar `s` in the range, interpolated linearly as the `f32` lookup does.
-    fn at(&self, s: f64) -> (f64, [f64; 3]) {
+    /// Node `m` (an entry).
+    fn node(&self, m: usize) -> Point {
+        let e = &self.e[m];
+        (e.tau as f64, e.color.map(|c| c as f64))
+    }
+
+    /// The transfer function at node coordinate `u` (`0 ..= n - 1`), interpolated linearly as
+    /// the `f32` lookup does.
+    fn at_node_coord(&self, u: f64) -> Point {
         let n = self.e.len();
-        if n == 1 {
-            let e = &self.e[0];
-            return (e.tau as f64, e.color.map(|c| c as f64));
-        }
-        let u = ((s - self.lo) / self.h).clamp(0.0, (n - 1) as f64);
+        let u = u.clamp(0.0, (n - 1) as f64);
         let j = (u as usize).min(n - 2);
         let w = u - j as f64;
         let (a, b) = (&self.e[j], &self.e[j + 1]);
@@ -340,62 +342,63 @@ impl<'a> Tf64<'a> {
         )
     }
 
-    /// Node `m`'s scalar value.
-    fn node(&self, m: usize) -> f64 {
-        self.lo + self.h * m as f64
+    /// The transfer function at scalar `s`.
+    #[cfg(test)]
+    fn at(&self, s: f64) -> Point {
+        if self.e.len() == 1 {
+            return self.node(0);
+        }
+        self.at_node_coord((s - self.lo) / self.h)
     }
 
     /// The segment of length `d` along which the scalar runs linearly from `a` to `b` (both in the
     /// range), as the entry the marcher composites (see the module docs).
     fn segment(&self, a: f64, b: f64, d: f64) -> TfEntry {
+        let n = self.e.len();
         let x_len = (b - a).abs();
-        if x_len == 0.0 || self.e.len() == 1 {
-            let (tau, c) = self.at(a);
+        if n == 1 {
+            let (tau, c) = self.node(0);
             return entry(tau, c);
         }
-        // Walk from a to b through the nodes in between: pieces on which tau and c are linear.
-        let dir = if b > a { 1.0 } else { -1.0 };
-        // Optical depth per unit of scalar walked.
+        let (ua, ub) = ((a - self.lo) / self.h, (b - self.lo) / self.h);
+        if x_len == 0.0 || ua == ub {
+            let (tau, c) = self.at_node_coord(ua);
+            return entry(tau, c);
+        }
+        // Walk in node coordinates from ua to ub through the nodes strictly in between: pieces on
+        // which tau and c are linear. `kappa`: optical depth per unit of tau and of scalar walked.
         let kappa = d / x_len;
-        let (mut tau_sum, mut depth) = (0.0f64, 0.0f64);
+        let up = ub > ua;
+        // Optical depth from the front, and the transmittance exp(-depth) (kept as a product of
+        // per-piece factors while the depth is below the cutoff).
+        let (mut tau_sum, mut depth, mut trans) = (0.0f64, 0.0f64, 1.0f64);
         let (mut num, mut den) = ([0.0f64; 3], 0.0f64);
         let mut col_sum = [0.0f64; 3];
-        let mut p0 = a;
-        let (mut t0, mut c0) = self.at(a);
-        // First node strictly beyond `a` in the walking direction.
-        let n = self.e.len();
-        let ua = (a - self.lo) / self.h;
-        let mut m = if dir > 0.0 {
-            (libm::floor(ua) + 1.0).max(0.0) as usize
-        } else {
-            (libm::ceil(ua) - 1.0).max(0.0) as usize
-        };
+        let (mut u0, mut p0) = (ua, self.at_node_coord(ua));
+        // The first node strictly beyond ua.
+        let mut m = if up { libm::floor(ua) + 1.0 } else { libm::ceil(ua) - 1.0 };
         loop {
-            // The piece's end: the next node, or b.
-            let node_ok = m < n && (self.node(m) - b) * dir < 0.0 && (self.node(m) - p0) * dir > 0.0;
-            let p1 = if node_ok { self.node(m) } else { b };
-            let (t1, c1) = self.at(p1);
-            let w = (p1 - p0).abs();
-            let piece_tau = 0.5 * (t0 + t1) * w;
+            let inside = if up { m < ub } else { m > ub };
+            let (u1, p1) = if inside {
+                (m, self.node(m as usize))
+            } else {
+                (ub, self.at_node_coord(ub))
+            };
+            let w = (u1 - u0).abs() * self.h;
+            let piece_tau = 0.5 * (p0.0 + p1.0) * w;
             tau_sum += piece_tau;
             for ch in 0..3 {
-                col_sum[ch] += 0.5 * (c0[ch] + c1[ch]) * w;
+                col_sum[ch] += 0.5 * (p0.1[ch] + p1.1[ch]) * w;
             }
-            if depth < DEPTH_CUTOFF && w > 0.0 {
-                integrate_piece([t0, t1], [c0, c1], w, kappa, depth, &mut num, &mut den);
+            if depth < DEPTH_CUTOFF && w > 0.0 && piece_tau > 0.0 {
+                trans = integrate_piece([p0, p1], w, kappa, depth, trans, &mut num, &mut den);
             }
             depth += kappa * piece_tau;
-            if !node_ok {
+            if !inside {
                 break;
             }
-            (p0, t0, c0) = (p1, t1, c1);
-            if dir > 0.0 {
-                m += 1;
-            } else if m == 0 {
-                m = n; // past the first node: the next piece ends at b
-            } else {
-                m -= 1;
-            }
+            (u0, p0) = (u1, p1);
+            m += if up { 1.0 } else { -1.0 };
         }
         let tau = tau_sum / x_len;
         let c = if den > 0.0 {
@@ -407,21 +410,35 @@ impl<'a> Tf64<'a> {
     }
 }
 
+/// `exp(-y)` for `y` in `[0, PIECE_DEPTH]`: Taylor to degree 9 (error below `3e-13`), cheaper
+/// than a library `exp`.
+#[inline(always)]
+fn exp_neg_small(y: f64) -> f64 {
+    // 1 - y (1 - y/2 (1 - y/3 (... (1 - y/9)))), the reciprocals as constants.
+    const INV: [f64; 9] = [1.0, 1.0 / 2.0, 1.0 / 3.0, 1.0 / 4.0, 1.0 / 5.0, 1.0 / 6.0, 1.0 / 7.0, 1.0 / 8.0, 1.0 / 9.0];
+    let mut r = 1.0;
+    for inv in INV.iter().rev() {
+        r = 1.0 - y * inv * r;
+    }
+    r
+}
+
 /// `int c tau exp(-D) dx` (into `num`) and `int tau exp(-D) dx` (into `den`) over one piece of
-/// scalar width `w` where `tau` and `c` are linear (`[start, end]` values), `D` the optical depth
-/// from the segment's front (`depth` at the piece's start, `kappa` per unit of scalar and of
-/// `tau`). The piece is cut where its depth passes multiples of [`PIECE_DEPTH`], up to the cutoff.
+/// scalar width `w` where `tau` and `c` are linear (`[start, end]`), `D` the optical depth from
+/// the segment's front (`depth` at the piece's start, where `exp(-D) = trans`; `kappa` per unit of
+/// scalar and of `tau`). The piece is cut where its depth passes multiples of [`PIECE_DEPTH`], up
+/// to the cutoff. Returns `exp(-D)` at the piece's end (or where the cutoff stopped it).
+#[allow(clippy::too_many_arguments)]
 fn integrate_piece(
-    tau: [f64; 2],
-    col: [[f64; 3]; 2],
+    [(t0, c0), (t1, c1)]: [Point; 2],
     w: f64,
     kappa: f64,
     depth: f64,
+    trans: f64,
     num: &mut [f64; 3],
     den: &mut f64,
-) {
+) -> f64 {
     // Depth within the piece after x: q(x) = kappa (t0 x + (t1 - t0) x^2 / (2 w)).
-    let (t0, t1) = (tau[0], tau[1]);
     let (qa, qb) = (kappa * (t1 - t0) / (2.0 * w), kappa * t0);
     let q = |x: f64| qb * x + qa * x * x;
     let total = q(w);
@@ -441,7 +458,7 @@ fn integrate_piece(
     let room = DEPTH_CUTOFF - depth;
     let span = if total < room { total } else { room };
     let cuts = libm::ceil(span / PIECE_DEPTH).clamp(1.0, (DEPTH_CUTOFF / PIECE_DEPTH) + 1.0) as usize;
-    let mut xa = 0.0;
+    let (mut xa, mut base) = (0.0, trans);
     for k in 1..=cuts {
         let xb = if k == cuts && total < room {
             w
@@ -449,18 +466,23 @@ fn integrate_piece(
             x_at(span * k as f64 / cuts as f64)
         };
         let (mid, half) = (0.5 * (xa + xb), 0.5 * (xb - xa));
+        // exp(-D(x)) = exp(-D(xa)) exp(-(q(x) - q(xa))), the second factor's argument in
+        // [0, 1/4] (up to rounding in x_at).
+        let qa0 = q(xa);
         for (gx, gw) in GL_X.iter().zip(GL_W) {
             let x = mid + half * gx;
             let f = x / w;
             let t = t0 + (t1 - t0) * f;
-            let weight = half * gw * t * libm::exp(-(depth + q(x)));
+            let weight = half * gw * t * base * exp_neg_small(max_f64(q(x) - qa0, 0.0));
             *den += weight;
             for ch in 0..3 {
-                num[ch] += weight * (col[0][ch] + (col[1][ch] - col[0][ch]) * f);
+                num[ch] += weight * (c0[ch] + (c1[ch] - c0[ch]) * f);
             }
         }
+        base *= exp_neg_small(max_f64(q(xb) - qa0, 0.0));
         xa = xb;
     }
+    base
 }
 
 #[inline]
