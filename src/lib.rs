@@ -51,6 +51,7 @@
 //! | volume marching | step, endpoint / midpoint sampling, early-termination epsilon, step cap | [`volume::MarchParams`] (`reference`, `quality`, `fast`) |
 //! | transfer function | table, scalar range, reference step of authored opacities | [`volume::TransferFunction`], [`volume::TfEntry::from_rgba_premultiplied`] |
 //! | empty-space skipping | macrocell block size | [`volume::GridParams`] (`fine`, default, `coarse`) |
+//! | pre-integration | table resolution, step | [`volume::PreintegratedTable::build`] |
 //! | compositing | k-vector, visibility order, sparse encoding, root | [`composite::Plan`], [`composite::auto_kvec`] with [`composite::CostModel`] |
 //! | SIMD width | `wide` picks AVX / SSE / NEON from target features | build with `-C target-cpu=native` |
 //!

@@ -69,6 +69,13 @@
 //! [`one_minus_exp_neg_x8`], in both, accurate also where `tau h` is tiny), so their results are
 //! **bit-identical** (0 ULP), with or without skipping and termination. [`integrate`] picks x8.
 //!
+//! # Pre-integration
+//! For transfer functions with features narrower than the scalar change over a step (thin
+//! iso-bands), [`integrate_preintegrated`] marches a [`PreintegratedMedium`]: the scalar at both
+//! ends of each step and the step's whole contribution from a [`PreintegratedTable`], exact for a
+//! scalar that is linear along the step. Same lattice, clipping, termination and bit-identical
+//! scalar/x8 pair; see [`preint`] for the table, its accuracy and its cost.
+//!
 //! # Bad input
 //! Never a panic and never a hang. Parameters are checked ([`MarchParams::validate`]): a step that
 //! is `0`, negative, NaN or infinite is [`VolumeError::InvalidStep`]. Invalid rays, rays that miss
@@ -81,8 +88,8 @@
 //! # References
 //! - N. Max, "Optical Models for Direct Volume Rendering", IEEE TVCG 1(2), 1995.
 //! - K. Engel, M. Kraus, T. Ertl, "High-Quality Pre-Integrated Volume Rendering Using
-//!   Hardware-Accelerated Pixel Shading", Graphics Hardware 2001 (pre-integration; not implemented
-//!   here, the linear interpolation of `tau` above is the part of it that this module shares).
+//!   Hardware-Accelerated Pixel Shading", Graphics Hardware 2001 ([`preint`]: pre-integrated
+//!   transfer functions).
 //! - T. Etiene, D. Jönsson, T. Ropinski, C. Scheidegger, J. Comba, L. G. Nonato, R. M. Kirby,
 //!   A. Ynnerman, C. T. Silva, "Verifying Volume Rendering Using Discretization Error Analysis",
 //!   IEEE TVCG 20(1), 2014 (the convergence-order tests in `tests/volume.rs`).

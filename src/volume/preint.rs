@@ -313,7 +313,11 @@ impl<'a> Tf64<'a> {
     fn new(tf: &TransferFunction<'a>) -> Self {
         let e = tf.entries();
         let (lo, hi) = tf.range();
-        let h = if e.len() > 1 { (hi as f64 - lo as f64) / (e.len() - 1) as f64 } else { 0.0 };
+        let h = if e.len() > 1 {
+            (hi as f64 - lo as f64) / (e.len() - 1) as f64
+        } else {
+            0.0
+        };
         Self { e, lo: lo as f64, h }
     }
 
@@ -376,7 +380,11 @@ impl<'a> Tf64<'a> {
         let mut col_sum = [0.0f64; 3];
         let (mut u0, mut p0) = (ua, self.at_node_coord(ua));
         // The first node strictly beyond ua.
-        let mut m = if up { libm::floor(ua) + 1.0 } else { libm::ceil(ua) - 1.0 };
+        let mut m = if up {
+            libm::floor(ua) + 1.0
+        } else {
+            libm::ceil(ua) - 1.0
+        };
         loop {
             let inside = if up { m < ub } else { m > ub };
             let (u1, p1) = if inside {
@@ -387,8 +395,8 @@ impl<'a> Tf64<'a> {
             let w = (u1 - u0).abs() * self.h;
             let piece_tau = 0.5 * (p0.0 + p1.0) * w;
             tau_sum += piece_tau;
-            for ch in 0..3 {
-                col_sum[ch] += 0.5 * (p0.1[ch] + p1.1[ch]) * w;
+            for (ch, s) in col_sum.iter_mut().enumerate() {
+                *s += 0.5 * (p0.1[ch] + p1.1[ch]) * w;
             }
             if depth < DEPTH_CUTOFF && w > 0.0 && piece_tau > 0.0 {
                 trans = integrate_piece([p0, p1], w, kappa, depth, trans, &mut num, &mut den);
@@ -415,7 +423,17 @@ impl<'a> Tf64<'a> {
 #[inline(always)]
 fn exp_neg_small(y: f64) -> f64 {
     // 1 - y (1 - y/2 (1 - y/3 (... (1 - y/9)))), the reciprocals as constants.
-    const INV: [f64; 9] = [1.0, 1.0 / 2.0, 1.0 / 3.0, 1.0 / 4.0, 1.0 / 5.0, 1.0 / 6.0, 1.0 / 7.0, 1.0 / 8.0, 1.0 / 9.0];
+    const INV: [f64; 9] = [
+        1.0,
+        1.0 / 2.0,
+        1.0 / 3.0,
+        1.0 / 4.0,
+        1.0 / 5.0,
+        1.0 / 6.0,
+        1.0 / 7.0,
+        1.0 / 8.0,
+        1.0 / 9.0,
+    ];
     let mut r = 1.0;
     for inv in INV.iter().rev() {
         r = 1.0 - y * inv * r;
@@ -475,8 +493,8 @@ fn integrate_piece(
             let t = t0 + (t1 - t0) * f;
             let weight = half * gw * t * base * exp_neg_small(max_f64(q(x) - qa0, 0.0));
             *den += weight;
-            for ch in 0..3 {
-                num[ch] += weight * (c0[ch] + (c1[ch] - c0[ch]) * f);
+            for (ch, s) in num.iter_mut().enumerate() {
+                *s += weight * (c0[ch] + (c1[ch] - c0[ch]) * f);
             }
         }
         base *= exp_neg_small(max_f64(q(xb) - qa0, 0.0));
