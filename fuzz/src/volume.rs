@@ -47,8 +47,9 @@ use crate::decode::{Input, Mode, negative_zeros};
 use strahl::math::f32x8;
 use strahl::volume::{
     COLOR_MAX, EmptyRegion, GridParams, Lookup, MAX_EMPTY_RADIUS, MAX_STEPS_LIMIT, Macrocell, MacrocellGrid,
-    MarchParams, MarchStats, Medium, Rgba, Sampling, TAU_MAX, TfEntry, TransferFunction, Volume, VolumeError,
-    VolumeMedium, Voxel, integrate, integrate_ray, integrate_scalar, integrate_x8,
+    MarchParams, MarchStats, Medium, PreintegratedMedium, PreintegratedTable, Rgba, Sampling, TAU_MAX, TfEntry,
+    TransferFunction, Volume, VolumeError, VolumeMedium, Voxel, integrate, integrate_preintegrated_scalar,
+    integrate_preintegrated_x8, integrate_ray, integrate_scalar, integrate_x8,
 };
 use strahl::{Aabb, Ray, Vec3};
 
@@ -601,6 +602,7 @@ fn check_typed<V: FuzzVoxel>(case: &VolumeCase, data: &[V]) -> VolumeReport {
         }
     }
 
+    check_preintegrated(&vol, &tf, &table, rays, &p, case.block, sane, &sa);
     if grid {
         check_optical_depth(&vol, &tf, data, case.constant, rays, &full, &none);
     }
@@ -609,6 +611,81 @@ fn check_typed<V: FuzzVoxel>(case: &VolumeCase, data: &[V]) -> VolumeReport {
         plain: sa,
         skipping: sb,
         bad_params: param_check.is_err(),
+    }
+}
+
+/// Pre-integrated marching (a table of `2 + seed % 23` nodes per axis): the entries are means
+/// (extinction finite and non-negative, colours within the table's range); scalar and x8 agree bit
+/// for bit with the same counters, which match the Riemann marcher's rays, truncations and (without
+/// termination) steps; a table for another step is refused; opacity lies in `[0, 1]` and colour in
+/// the table's range times `A`; invalid rays and empty volumes give `Rgba::ZERO`.
+#[allow(clippy::too_many_arguments)]
+fn check_preintegrated<V: FuzzVoxel>(
+    vol: &Volume<'_, V>,
+    tf: &TransferFunction<'_>,
+    table: &[TfEntry],
+    rays: &[Ray],
+    p: &MarchParams,
+    seed: u32,
+    sane: bool,
+    riemann: &MarchStats,
+) {
+    let res = 2 + seed % 23;
+    let pre = PreintegratedTable::build(tf, p.step, res).expect("a valid step and resolution");
+    let (cmin, cmax) = colour_range(table);
+    let maxc = tf.max_color();
+    for (k, e) in pre.entries().iter().enumerate() {
+        assert!(e.tau.is_finite() && e.tau >= 0.0, "entry {k}: {e:?}");
+        for c in 0..3 {
+            let tol = 1e-6 * maxc + 1e-30;
+            assert!(
+                e.color[c] >= cmin[c] - tol && e.color[c] <= cmax[c] + tol,
+                "entry {k}: {e:?} outside the colours [{cmin:?}, {cmax:?}]"
+            );
+        }
+    }
+    let m = PreintegratedMedium::new(*vol, pre.view());
+    let other = MarchParams {
+        step: if p.step < 1.0 { p.step * 2.0 } else { p.step * 0.5 },
+        ..*p
+    };
+    let mut out = vec![SENTINEL; rays.len()];
+    assert_eq!(
+        integrate_preintegrated_x8(&m, rays, &mut out, &other),
+        Err(VolumeError::StepMismatch)
+    );
+    assert!(out.iter().all(|x| x.bit_eq(&SENTINEL)), "nothing written on error");
+    let mut a = vec![SENTINEL; rays.len() + 1];
+    let mut b = vec![SENTINEL; rays.len() + 1];
+    let sa = integrate_preintegrated_scalar(&m, rays, &mut a, p).expect("valid parameters");
+    let sb = integrate_preintegrated_x8(&m, rays, &mut b, p).expect("valid parameters");
+    assert!(a[rays.len()].bit_eq(&SENTINEL) && b[rays.len()].bit_eq(&SENTINEL));
+    for (i, (x, y)) in a.iter().zip(&b).take(rays.len()).enumerate() {
+        assert!(same_rgba(x, y), "ray {i}: pre-integrated scalar {x:?} x8 {y:?} ({p:?})");
+    }
+    assert_eq!(sa, sb, "pre-integrated counters");
+    assert_eq!((sa.rays, sa.truncated), (riemann.rays, riemann.truncated));
+    if p.termination.is_none() {
+        assert_eq!(sa.samples, riemann.samples);
+    }
+    let n_max = p.max_steps.min(1 << 16) as f32;
+    for (i, (x, ray)) in a.iter().zip(rays).enumerate() {
+        assert!((0.0..=1.0).contains(&x.a), "ray {i}: pre-integrated A {}", x.a);
+        if !ray.is_valid() || vol.is_empty() {
+            assert!(x.bit_eq(&Rgba::ZERO), "ray {i}: {x:?}");
+        }
+        if sane {
+            let tol = maxc * (2e-6 * (n_max + 2.0) + 1e-6) + 1e-30;
+            for (c, v) in [x.r, x.g, x.b].into_iter().enumerate() {
+                assert!(
+                    v.is_finite() && v >= cmin[c] * x.a - tol && v <= cmax[c] * x.a + tol,
+                    "ray {i}: pre-integrated channel {c} = {v} outside [{}, {}] A (A = {})",
+                    cmin[c],
+                    cmax[c],
+                    x.a
+                );
+            }
+        }
     }
 }
 
