@@ -905,6 +905,73 @@ proptest! {
     }
 }
 
+/// Empty-space skipping with a grid classified for the table: the same image bit for bit, the
+/// same steps (marched + skipped), on a sparse volume and on random cases; grids classified for
+/// anything else are refused.
+#[test]
+fn preintegrated_skipping_leaves_the_image_unchanged() {
+    let data = ball(32, 0.3);
+    let vol = unit_volume(&data, 32);
+    let table = ball_tf();
+    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    let rays = test_rays(300);
+    for (step, res, block) in [(0.02f32, 64u32, 4u32), (0.05, 8, 2), (0.005, 256, 8), (0.3, 33, 8)] {
+        let pre = PreintegratedTable::build(&tf, step, res).unwrap();
+        let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+        grid.classify(&tf);
+        let plain = PreintegratedMedium::new(vol, pre.view());
+        assert_eq!(plain.with_grid(&grid).unwrap_err(), VolumeError::StaleGrid);
+        let other = PreintegratedTable::build(&tf, step, res + 1).unwrap();
+        grid.classify_preintegrated(&other);
+        assert_eq!(plain.with_grid(&grid).unwrap_err(), VolumeError::StaleGrid);
+        grid.classify_preintegrated(&pre);
+        assert!(grid.empty_fraction() > 0.2, "{}", grid.empty_fraction());
+        let skipping = plain.with_grid(&grid).unwrap();
+        assert!(skipping.skips() && !plain.skips());
+        for p in [MarchParams::reference(step), MarchParams::fast(step)] {
+            let (a, sa) = both_pre(&plain, &rays, &p);
+            let (b, sb) = both_pre(&skipping, &rays, &p);
+            for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+                assert!(x.bit_eq(y), "step {step} res {res} ray {i}: {x:?} vs {y:?}");
+            }
+            assert_eq!(sa.skipped, 0);
+            assert!(sb.skipped > 0);
+            assert_eq!(sa.samples, sb.samples + sb.skipped);
+            assert_eq!(
+                (sa.rays, sa.terminated, sa.truncated),
+                (sb.rays, sb.terminated, sb.truncated)
+            );
+        }
+    }
+    let small = MacrocellGrid::build(&unit_volume(&data[..4096], 16), GridParams::default()).unwrap();
+    let pre = PreintegratedTable::build(&tf, 0.1, 16).unwrap();
+    assert_eq!(
+        PreintegratedMedium::new(vol, pre.view()).with_grid(&small).unwrap_err(),
+        VolumeError::GridMismatch
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Skipping changes nothing on random volumes, transfer functions, resolutions, blocks and rays.
+    #[test]
+    fn preintegrated_skipping_agrees((data, dims, table, rays, p, block) in arb_case()) {
+        let vol = Volume::new(&data, dims, Vec3::new(0.5, 0.25, 0.75), Vec3::new(0.1, -0.2, 0.3)).unwrap();
+        let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+        let pre = PreintegratedTable::build(&tf, p.step, 2 + 5 * block).unwrap();
+        let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+        grid.classify_preintegrated(&pre);
+        let plain = PreintegratedMedium::new(vol, pre.view());
+        let (a, sa) = both_pre(&plain, &rays, &p);
+        let (b, sb) = both_pre(&plain.with_grid(&grid).unwrap(), &rays, &p);
+        for (x, y) in a.iter().zip(&b) {
+            prop_assert!(x.bit_eq(y), "{:?} vs {:?}", x, y);
+        }
+        prop_assert_eq!(sa.samples, sb.samples + sb.skipped);
+    }
+}
+
 #[test]
 fn preintegrated_bad_input() {
     let data = [100u8; 64];

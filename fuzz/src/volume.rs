@@ -665,6 +665,24 @@ fn check_preintegrated<V: FuzzVoxel>(
     }
     assert_eq!(sa, sb, "pre-integrated counters");
     assert_eq!((sa.rays, sa.truncated), (riemann.rays, riemann.truncated));
+    // Skipping with a grid classified for the table: the same image, the same steps.
+    let mut grid = MacrocellGrid::build(vol, GridParams { block: 2 << (seed % 3) }).expect("a valid block");
+    assert_eq!(m.with_grid(&grid).map(|_| ()).unwrap_err(), VolumeError::StaleGrid);
+    grid.classify_preintegrated(&pre);
+    let ms = m.with_grid(&grid).expect("a grid classified for the table");
+    let mut c = vec![SENTINEL; rays.len()];
+    let mut d = vec![SENTINEL; rays.len()];
+    let sc = integrate_preintegrated_scalar(&ms, rays, &mut c, p).expect("valid parameters");
+    let sd = integrate_preintegrated_x8(&ms, rays, &mut d, p).expect("valid parameters");
+    for (i, ((x, y), z)) in a.iter().zip(&c).zip(&d).enumerate() {
+        assert!(
+            same_rgba(x, y) && same_rgba(x, z),
+            "ray {i}: pre-integrated {x:?}, skipping scalar {y:?}, x8 {z:?}"
+        );
+    }
+    assert_eq!(sc, sd, "pre-integrated skipping counters");
+    assert_eq!(sa.samples, sc.samples + sc.skipped);
+    assert_eq!((sa.rays, sa.terminated, sa.truncated), (sc.rays, sc.terminated, sc.truncated));
     if p.termination.is_none() {
         assert_eq!(sa.samples, riemann.samples);
     }

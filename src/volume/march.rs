@@ -282,19 +282,7 @@ impl Ctx {
     /// lies in `r.safe` (then all do: positions are monotone in `k`), else just past `k`.
     #[inline]
     fn jump(&self, sp: &Span, k: u32, g: [f32; 3], r: &EmptyRegion) -> u32 {
-        let mut s_exit = f32::INFINITY;
-        for a in 0..3 {
-            let d = sp.gd[a];
-            let bound = if d > 0.0 {
-                r.exit.max[a]
-            } else if d < 0.0 {
-                r.exit.min[a]
-            } else {
-                continue;
-            };
-            // Only a guess (checked below), so the reciprocal will do.
-            s_exit = min_l((bound - sp.ge[a]) * sp.inv_gd[a], s_exit);
-        }
+        let s_exit = exit_distance(sp, r);
         // Sample positions are k dt (endpoint) or k dt + dt / 2 (midpoint, full steps).
         let q = s_exit * self.inv_dt - if self.mid { 0.5 } else { 0.0 };
         let kn = if q < sp.n as f32 { libm::ceilf(q) as u32 } else { sp.n };
@@ -306,6 +294,57 @@ impl Ctx {
             }
         }
         kn
+    }
+
+    /// Pre-integrated marching: the front of step `k`, at local position `front`, lies in the
+    /// empty region `r`. Returns the step to resume at, past the steps whose front and back both
+    /// lie in `r.safe`: up to the last step that ends before the exit, if the front and that
+    /// step's end (computed as the marcher computes it) lie in `r.safe` (then every skipped step
+    /// does: positions are monotone along the ray); else `k` (nothing skipped).
+    #[inline]
+    fn jump_segments(&self, sp: &Span, k: u32, front: [f32; 3], r: &EmptyRegion) -> u32 {
+        // Lattice point j (position j dt) lies before the exit for j < q; step j ends at j + 1.
+        let q = exit_distance(sp, r) * self.inv_dt;
+        let kn = if q < sp.n as f32 {
+            (libm::ceilf(q) as u32).saturating_sub(1)
+        } else {
+            sp.n
+        };
+        if kn <= k {
+            return k;
+        }
+        let inside = |g: [f32; 3]| r.safe.contains_point(Vec3::from_array(g));
+        if inside(front) && inside(self.end_position(sp, kn - 1).0) {
+            kn
+        } else {
+            k
+        }
+    }
+
+    /// Pre-integrated marching: jumps over empty regions from step `k`, whose front (at `front`)
+    /// lies in `r`, region after region ([`jump_segments`](Self::jump_segments)), until a front
+    /// outside any or a jump that is refused; returns the step to march next (`k` if none was
+    /// skipped, `sp.n` if the rest was).
+    fn skip_segments<V: Voxel>(
+        &self,
+        m: &PreintegratedMedium<'_, V>,
+        sp: &Span,
+        k: u32,
+        front: [f32; 3],
+        r: &EmptyRegion,
+    ) -> u32 {
+        let (mut k, mut front, mut r) = (k, front, *r);
+        loop {
+            let kn = self.jump_segments(sp, k, front, &r);
+            if kn <= k || kn >= sp.n {
+                return kn.max(k);
+            }
+            (k, front) = (kn, self.end_position(sp, kn - 1).0);
+            match m.empty_region(front) {
+                Some(next) => r = next,
+                None => return k,
+            }
+        }
     }
 
     /// Jumps over empty regions from sample `k` (in region `r`, at `g`) until a sample outside
@@ -324,6 +363,25 @@ impl Ctx {
             }
         }
     }
+}
+
+/// Distance along the span from its entry to where it leaves `r.exit` (a guess: the reciprocal
+/// direction is used; callers check what they jump to).
+#[inline]
+fn exit_distance(sp: &Span, r: &EmptyRegion) -> f32 {
+    let mut s_exit = f32::INFINITY;
+    for a in 0..3 {
+        let d = sp.gd[a];
+        let bound = if d > 0.0 {
+            r.exit.max[a]
+        } else if d < 0.0 {
+            r.exit.min[a]
+        } else {
+            continue;
+        };
+        s_exit = min_l((bound - sp.ge[a]) * sp.inv_gd[a], s_exit);
+    }
+    s_exit
 }
 
 /// One step front to back: `a = 1 - exp(-tau h)`; `C += (1 - A) a c`; `A += (1 - A) a`.
@@ -676,13 +734,27 @@ fn march_preintegrated_scalar<V: Voxel>(
     stats: &mut MarchStats,
 ) -> Rgba {
     let (mut col, mut acc) = ([0.0f32; 3], 0.0f32);
-    let mut front = m.scalar(sp.ge);
+    let mut front_pos = sp.ge;
+    let mut front = m.scalar(front_pos);
     let mut k = 0u32;
     while k < sp.n {
+        if let Some(r) = m.empty_region(front_pos) {
+            let kn = ctx.skip_segments(m, sp, k, front_pos, &r);
+            if kn > k {
+                stats.skipped += (kn - k) as u64;
+                k = kn;
+                if k >= sp.n {
+                    break;
+                }
+                // The front the marcher without a grid carries into step k.
+                front_pos = ctx.end_position(sp, k - 1).0;
+                front = m.scalar(front_pos);
+            }
+        }
         let (g, h) = ctx.end_position(sp, k);
         let back = m.scalar(g);
         let (tau, color) = m.table().lookup_scalar(front, back);
-        front = back;
+        (front, front_pos) = (back, g);
         composite_scalar(tau, color, h, &mut col, &mut acc);
         stats.samples += 1;
         k += 1;
@@ -704,7 +776,9 @@ fn march_preintegrated_scalar<V: Voxel>(
 /// its end (its start is the previous step's end; the first step samples the entry point too) and
 /// composites the table's entry for the pair as the Riemann marcher composites a sample. The
 /// lattice, the clipping, termination, `max_steps` and the counters are
-/// [`integrate_scalar`]'s (`samples` counts steps); [`MarchParams::sampling`] is not used.
+/// [`integrate_scalar`]'s (`samples` counts the steps marched, `skipped` those jumped over where
+/// the medium has a grid, [`PreintegratedMedium::with_grid`]); [`MarchParams::sampling`] is not
+/// used.
 ///
 /// Errors: as [`integrate_scalar`], and [`VolumeError::StepMismatch`] unless `params.step` is
 /// the table's step.
@@ -789,14 +863,13 @@ pub fn integrate_preintegrated_x8<V: Voxel>(
             acc: z,
         },
     };
-    // The scalar at each lane's current step start.
-    let mut front = [0.0f32; 8];
+    // The scalar at each lane's current step start, and where it was sampled.
+    let (mut front, mut fpos) = (z, [z; 3]);
     let mut next = 0usize;
-    for (l, f) in front.iter_mut().enumerate() {
+    for l in 0..8 {
         ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
-        *f = m.scalar(ln.span[l].ge);
+        start_lane(m, &ln.span[l], l, &mut front, &mut fpos);
     }
-    let mut front = f32x8::new(front);
     let dt = f32x8::splat(ctx.dt);
     let thr = f32x8::splat(ctx.thr);
     let (zero, one) = (f32x8::splat(0.0), f32x8::splat(1.0));
@@ -804,10 +877,22 @@ pub fn integrate_preintegrated_x8<V: Voxel>(
     let mut prefetch_now = false;
     let mut v = ln.v;
     loop {
-        let live = v.k.lt(v.n) & v.acc.lt(thr);
-        let active = live.bitmask();
+        let mut live = v.k.lt(v.n) & v.acc.lt(thr);
+        let mut active = live.bitmask();
         if active == 0 {
             break;
+        }
+        if m.skips()
+            && skip_lanes(
+                m, &ctx, active, &mut ln, &mut v, &mut front, &mut fpos, rays, out, &mut next, &mut stats,
+            )
+        {
+            // Lanes jumped (and may have taken new rays): march each from where it landed.
+            live = v.k.lt(v.n) & v.acc.lt(thr);
+            active = live.bitmask();
+            if active == 0 {
+                break;
+            }
         }
         // The step's end, as `Ctx::end_position` per lane.
         let s0 = v.k * dt;
@@ -823,7 +908,7 @@ pub fn integrate_preintegrated_x8<V: Voxel>(
         }
         let back = m.volume().sample_local_x8(g);
         let (tau, color) = m.table().lookup_x8(front, back);
-        front = back;
+        (front, fpos) = (back, g);
         composite_x8(live, tau, color, h, &mut v);
         v.k += one;
         stats.samples += active.count_ones() as u64;
@@ -835,12 +920,75 @@ pub fn integrate_preintegrated_x8<V: Voxel>(
                 let l = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
                 ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
-                set_lane(&mut front, l, m.scalar(ln.span[l].ge));
+                start_lane(m, &ln.span[l], l, &mut front, &mut fpos);
             }
             v = ln.v;
         }
     }
     Ok(stats)
+}
+
+/// Lane `l` of the pre-integrated x8 marcher starts its span `sp`: the front sample at the entry.
+#[inline]
+fn start_lane<V: Voxel>(m: &PreintegratedMedium<'_, V>, sp: &Span, l: usize, front: &mut f32x8, fpos: &mut [f32x8; 3]) {
+    set_lane(front, l, m.scalar(sp.ge));
+    for (p, x) in fpos.iter_mut().zip(sp.ge) {
+        set_lane(p, l, x);
+    }
+}
+
+/// Pre-integrated x8 marching with a grid: every `active` lane whose front lies in an empty region
+/// jumps as the scalar marcher does ([`Ctx::skip_segments`]), then takes the front the marcher
+/// without a grid would carry, or finishes and takes the next ray. Returns `true` if any lane
+/// moved.
+#[allow(clippy::too_many_arguments)]
+fn skip_lanes<V: Voxel>(
+    m: &PreintegratedMedium<'_, V>,
+    ctx: &Ctx,
+    active: u32,
+    ln: &mut Lanes,
+    v: &mut LaneVecs,
+    front: &mut f32x8,
+    fpos: &mut [f32x8; 3],
+    rays: &[Ray],
+    out: &mut [Rgba],
+    next: &mut usize,
+    stats: &mut MarchStats,
+) -> bool {
+    let mut regions = [EmptyRegion::default(); 8];
+    let mut bits = m.empty_regions_x8(*fpos, active, &mut regions);
+    if bits == 0 {
+        return false;
+    }
+    let mut moved = false;
+    let pos = fpos.map(|p| p.to_array());
+    let ks = v.k.to_array();
+    while bits != 0 {
+        let l = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        let (fp, r) = ([pos[0][l], pos[1][l], pos[2][l]], regions[l]);
+        let (k, sp) = (ks[l] as u32, ln.span[l]);
+        let kn = ctx.skip_segments(m, &sp, k, fp, &r);
+        if kn <= k {
+            continue;
+        }
+        moved = true;
+        stats.skipped += (kn - k) as u64;
+        set_lane(&mut v.k, l, kn as f32);
+        if kn >= sp.n {
+            ln.v = *v;
+            ln.finish_and_refill(l, ctx, rays, out, next, stats);
+            *v = ln.v;
+            start_lane(m, &ln.span[l], l, front, fpos);
+        } else {
+            let g = ctx.end_position(&sp, kn - 1).0;
+            set_lane(front, l, m.scalar(g));
+            for (p, x) in fpos.iter_mut().zip(g) {
+                set_lane(p, l, x);
+            }
+        }
+    }
+    moved
 }
 
 /// Pre-integrated marching with the fastest kernel, [`integrate_preintegrated_x8`].

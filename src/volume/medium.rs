@@ -199,14 +199,6 @@ impl<'a, V: Voxel> VolumeMedium<'a, V> {
     pub fn skips(&self) -> bool {
         self.grid.is_some()
     }
-
-    #[inline(always)]
-    fn region(&self, grid: &GridView<'a>, block: &Aabb) -> EmptyRegion {
-        EmptyRegion {
-            exit: grid.exit_box(block),
-            safe: Aabb::new(block.min - Vec3::splat(0.5), block.max + Vec3::splat(0.5)),
-        }
-    }
 }
 
 impl<V: Voxel> Medium for VolumeMedium<'_, V> {
@@ -225,9 +217,9 @@ impl<V: Voxel> Medium for VolumeMedium<'_, V> {
         }
         let cell = self.vol.cell_scalar(g);
         if let Some(grid) = &self.grid
-            && let Some(block) = grid.region(cell.idx)
+            && let Some(r) = grid.empty_region(cell.idx)
         {
-            return Lookup::Empty(self.region(grid, &block));
+            return Lookup::Empty(r);
         }
         let s = self.vol.interp_scalar(&cell);
         let (tau, color) = self.tf.lookup_scalar(s);
@@ -252,8 +244,8 @@ impl<V: Voxel> Medium for VolumeMedium<'_, V> {
                 if active >> l & 1 == 0 {
                     continue;
                 }
-                if let Some(block) = grid.region([cell.idx[0][l], cell.idx[1][l], cell.idx[2][l]]) {
-                    *e = self.region(grid, &block);
+                if let Some(r) = grid.empty_region([cell.idx[0][l], cell.idx[1][l], cell.idx[2][l]]) {
+                    *e = r;
                     skip |= 1 << l;
                 }
             }

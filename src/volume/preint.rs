@@ -51,14 +51,21 @@
 //! one trilinear sample per step (the back sample of one step is the front sample of the next)
 //! and a bilinear lookup in the table instead of a linear one.
 //!
-//! # Not (yet) here
-//! The pre-integrated marchers take no macrocell grid: no empty-space skipping.
+//! # Empty-space skipping
+//! A [`MacrocellGrid`] classified with [`MacrocellGrid::classify_preintegrated`] marks the blocks
+//! whose value range only reads zero-extinction segments of the table
+//! ([`PreintegratedTable::is_transparent`]); [`PreintegratedMedium::with_grid`] uses it. The
+//! marchers skip a run of steps only where the front of the first and the back of the last lie in
+//! one empty region's safe box (positions are monotone along the ray, so every skipped step lies
+//! in it, and each adds exactly `+0`), then resume with the front sample the marcher without a
+//! grid would have carried: the image is bit-identical with and without skipping.
 
 use super::grid::Volume;
+use super::skip::GridView;
 use super::transfer::{TfEntry, TransferFunction};
-use super::{VolumeError, Voxel};
+use super::{EmptyRegion, Macrocell, MacrocellGrid, VolumeError, Voxel};
 use crate::geometry::Aabb;
-use crate::math::{Lane, f32x8, i32x8, max_l, min_l};
+use crate::math::{Lane, abs, f32x8, i32x8, max_l, min_l};
 use glam::Vec3;
 
 /// Largest table resolution (nodes per axis): `512`, so a table holds at most `2^18` entries
@@ -112,6 +119,7 @@ pub struct PreintegratedTable<S> {
     scale: f32,
     last: f32,
     step: f32,
+    fingerprint: u64,
 }
 
 /// Entries a table of `res` nodes per axis needs, or the error for a bad `res`.
@@ -156,6 +164,12 @@ impl<S: AsRef<[TfEntry]> + AsMut<[TfEntry]>> PreintegratedTable<S> {
                 *e = f.segment(node(i as u32), node(j as u32), step as f64);
             }
         }
+        // What transparency depends on: the transfer function's fingerprint and the nodes; the
+        // tag keeps it apart from any transfer function's own.
+        let mut fingerprint = tf.fingerprint();
+        for b in (res as u64 | 0x7072_6569_6e74 << 16).to_le_bytes() {
+            fingerprint = (fingerprint ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3);
+        }
         Ok(Self {
             entries: storage,
             res,
@@ -164,6 +178,7 @@ impl<S: AsRef<[TfEntry]> + AsMut<[TfEntry]>> PreintegratedTable<S> {
             scale: (res - 1) as f32 / (hi - lo),
             last: (res - 1) as f32,
             step,
+            fingerprint,
         })
     }
 }
@@ -213,7 +228,51 @@ impl<S: AsRef<[TfEntry]>> PreintegratedTable<S> {
             scale: self.scale,
             last: self.last,
             step: self.step,
+            fingerprint: self.fingerprint,
         }
+    }
+
+    /// A hash of what [`is_transparent`](Self::is_transparent) depends on (the transfer
+    /// function's [fingerprint](TransferFunction::fingerprint) and the resolution), never equal to
+    /// a transfer function's own: what [`MacrocellGrid::classify_preintegrated`] remembers.
+    ///
+    /// [`MacrocellGrid::classify_preintegrated`]: super::MacrocellGrid::classify_preintegrated
+    #[inline]
+    pub fn fingerprint(&self) -> u64 {
+        self.fingerprint
+    }
+
+    /// `true` if every segment whose values both lie in `[min, max]` looks up zero extinction.
+    /// Conservative as [`TransferFunction::is_transparent`]: the range is padded by
+    /// `(|min| + |max|) 2^-16` first; then the nodes a lookup in it can read span `i..=j`, and the
+    /// widest segment among them, entry `(i, j)`, has zero mean extinction only if the transfer
+    /// function has none anywhere between (a positive mean never rounds to zero in the table), so
+    /// neither has any segment in between. A NaN bound, or `min > max`, checks the whole range.
+    ///
+    /// ```
+    /// use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// let mut table = [TfEntry::TRANSPARENT; 16];
+    /// table[10] = TfEntry::new([1.0; 3], 5.0);
+    /// let tf = TransferFunction::new(&table, 0.0, 15.0).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.5, 16).unwrap();
+    /// assert!(pre.is_transparent(0.0, 8.5));
+    /// assert!(!pre.is_transparent(0.0, 9.5)); // reads node 10
+    /// assert!(!pre.is_transparent(f32::NAN, 1.0));
+    /// ```
+    pub fn is_transparent(&self, min: f32, max: f32) -> bool {
+        let (a, b) = if min <= max {
+            let pad = (abs(min) + abs(max)) * (1.0 / 65536.0) + f32::MIN_POSITIVE;
+            // coord is monotone (every rounding is), so all values in the padded range map between.
+            (self.coord(min - pad), self.coord(max + pad))
+        } else {
+            (0.0, self.last)
+        };
+        let top = self.res as usize - 1;
+        let i = (a as usize).min(top - 1);
+        let j = (b as usize + 1).min(top);
+        self.entries()
+            .get(i * self.res as usize + j)
+            .is_some_and(|e| e.tau == 0.0)
     }
 
     /// Table coordinate of `s`, clamped to `[0, res - 1]` (NaN: 0), as [`TransferFunction`]'s.
@@ -509,8 +568,12 @@ fn max_f64(a: f64, b: f64) -> f64 {
 }
 
 /// An `f32` entry from `f64` mean extinction and colour (finite: both are means of finite values).
+/// A positive extinction stays positive (at least the least subnormal), so that a zero entry means
+/// no extinction anywhere along its segment ([`PreintegratedTable::is_transparent`]).
 fn entry(tau: f64, c: [f64; 3]) -> TfEntry {
-    TfEntry::new(c.map(|x| x as f32), tau as f32)
+    let t = tau as f32;
+    let t = if tau > 0.0 && t == 0.0 { f32::from_bits(1) } else { t };
+    TfEntry::new(c.map(|x| x as f32), t)
 }
 
 /// A [`Volume`] seen through a [`PreintegratedTable`]: what the pre-integrated marchers
@@ -536,12 +599,89 @@ fn entry(tau: f64, c: [f64; 3]) -> TfEntry {
 pub struct PreintegratedMedium<'a, V: Voxel> {
     vol: Volume<'a, V>,
     table: PreintegratedTable<&'a [TfEntry]>,
+    grid: Option<GridView<'a>>,
 }
 
 impl<'a, V: Voxel> PreintegratedMedium<'a, V> {
-    /// The volume seen through `table`.
+    /// The volume seen through `table`, without empty-space skipping.
     pub fn new(vol: Volume<'a, V>, table: PreintegratedTable<&'a [TfEntry]>) -> Self {
-        Self { vol, table }
+        Self { vol, table, grid: None }
+    }
+
+    /// The medium with empty-space skipping over `grid`, classified with
+    /// [`MacrocellGrid::classify_preintegrated`] for this table. The marchers then jump over the
+    /// steps whose both ends lie in the safe box of an empty region; the image is bit-identical
+    /// (see [`skip`](super::skip) for why, with segments in place of samples).
+    ///
+    /// Errors: [`VolumeError::GridMismatch`] for a grid of other dimensions,
+    /// [`VolumeError::StaleGrid`] if it was not classified for this table.
+    ///
+    /// ```
+    /// use strahl::Vec3;
+    /// use strahl::volume::*;
+    /// let data = vec![0u8; 16 * 16 * 16];
+    /// let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.5, 64).unwrap();
+    /// let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// grid.classify(&tf); // for the Riemann marchers: refused here
+    /// assert_eq!(PreintegratedMedium::new(vol, pre.view()).with_grid(&grid).unwrap_err(), VolumeError::StaleGrid);
+    /// grid.classify_preintegrated(&pre);
+    /// let m = PreintegratedMedium::new(vol, pre.view()).with_grid(&grid).unwrap();
+    /// assert!(m.skips());
+    /// ```
+    pub fn with_grid<S: AsRef<[Macrocell]>>(self, grid: &'a MacrocellGrid<S>) -> Result<Self, VolumeError> {
+        if grid.volume_dims() != self.vol.dims() {
+            return Err(VolumeError::GridMismatch);
+        }
+        if grid.classified_for() != Some(self.table.fingerprint()) {
+            return Err(VolumeError::StaleGrid);
+        }
+        Ok(Self {
+            grid: Some(grid.view()),
+            ..self
+        })
+    }
+
+    /// `true` if empty-space skipping is on.
+    #[inline]
+    pub fn skips(&self) -> bool {
+        self.grid.is_some()
+    }
+
+    /// [`empty_region`](Self::empty_region) for the `active` lanes of eight positions: the mask of
+    /// lanes in empty regions, their regions written to `out`.
+    #[inline(always)]
+    pub(crate) fn empty_regions_x8(&self, g: [f32x8; 3], active: u32, out: &mut [EmptyRegion; 8]) -> u32 {
+        let Some(grid) = self.grid.as_ref() else {
+            return 0;
+        };
+        if self.vol.is_empty() {
+            return 0;
+        }
+        let cell = self.vol.cell_x8(g);
+        let mut mask = 0;
+        let mut bits = active;
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            if let Some(r) = grid.empty_region([cell.idx[0][l], cell.idx[1][l], cell.idx[2][l]]) {
+                out[l] = r;
+                mask |= 1 << l;
+            }
+        }
+        mask
+    }
+
+    /// The empty region around local position `g`, if skipping is on and `g`'s macrocell is empty.
+    #[inline(always)]
+    pub(crate) fn empty_region(&self, g: [f32; 3]) -> Option<EmptyRegion> {
+        let grid = self.grid.as_ref()?;
+        if self.vol.is_empty() {
+            return None;
+        }
+        grid.empty_region(self.vol.cell_scalar(Vec3::from_array(g)).idx)
     }
 
     /// The volume.
@@ -706,6 +846,52 @@ mod tests {
         let e = pre.entries()[2 * 3]; // from 1 to 0
         assert!((e.color[1] - 1.0).abs() < 1e-3, "{e:?}");
         assert!(e.tau.is_finite());
+    }
+
+    /// `is_transparent` is conservative: where it says so, every lookup with both values in the
+    /// range (and a little beyond, for the interpolation's rounding) reads zero extinction; and it
+    /// says so for ranges well inside zero stretches. A tiny positive mean stays positive.
+    #[test]
+    fn transparency_is_conservative() {
+        let mut t = tf_table();
+        for e in &mut t[1..=4] {
+            e.tau = 0.0; // zero over [1/16, 4/16]
+        }
+        t[9].tau = 1e-44; // a mean of it over many nodes is below the least f32
+        let tf = TransferFunction::new(&t, 0.0, 1.0).unwrap();
+        for res in [2u32, 5, 16, 17, 40] {
+            let pre = PreintegratedTable::build(&tf, 0.2, res).unwrap();
+            assert!(
+                pre.entries()
+                    .iter()
+                    .all(|e| e.tau > 0.0 || e.tau == 0.0 && !e.tau.is_sign_negative())
+            );
+            let mut some = false;
+            for i in 0..=64 {
+                for j in i..=64 {
+                    let (lo, hi) = (i as f32 / 64.0, j as f32 / 64.0);
+                    if !pre.is_transparent(lo, hi) {
+                        continue;
+                    }
+                    some |= j > i;
+                    for a in 0..=8 {
+                        for b in 0..=8 {
+                            let pad = 1e-6;
+                            let sf = lo - pad + (hi - lo + 2.0 * pad) * a as f32 / 8.0;
+                            let sb = lo - pad + (hi - lo + 2.0 * pad) * b as f32 / 8.0;
+                            assert_eq!(pre.lookup_scalar(sf, sb).0, 0.0, "res {res} [{lo}, {hi}]: ({sf}, {sb})");
+                        }
+                    }
+                }
+            }
+            // With 40 nodes the range around 0.125 reads only zero segments.
+            if res == 40 {
+                assert!(some && pre.is_transparent(0.12, 0.13));
+            }
+            assert!(
+                !pre.is_transparent(0.0, 1.0) && !pre.is_transparent(f32::NAN, 0.5) && !pre.is_transparent(0.5, 0.4)
+            );
+        }
     }
 
     /// A one-entry transfer function is constant: every table entry is it.

@@ -35,7 +35,7 @@
 //! grid whose fingerprint differs ([`VolumeError::StaleGrid`]). Colour-only changes keep the
 //! fingerprint.
 
-use super::{TransferFunction, Volume, VolumeError, Voxel};
+use super::{EmptyRegion, PreintegratedTable, TfEntry, TransferFunction, Volume, VolumeError, Voxel};
 use crate::geometry::Aabb;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -165,6 +165,18 @@ impl<'a> GridView<'a> {
     #[inline]
     pub(crate) fn exit_box(&self, block: &Aabb) -> Aabb {
         Aabb::new(block.min, block.max.min(Vec3::from_array(self.gmax)))
+    }
+
+    /// The region the marcher may jump across around a sample in cell `idx`, if its macrocell is
+    /// empty: the blocks of [`region`](Self::region) to exit, and their safe box (half a voxel
+    /// wider, point 1 of the module docs).
+    #[inline(always)]
+    pub(crate) fn empty_region(&self, idx: [i32; 3]) -> Option<EmptyRegion> {
+        let block = self.region(idx)?;
+        Some(EmptyRegion {
+            exit: self.exit_box(&block),
+            safe: Aabb::new(block.min - Vec3::splat(0.5), block.max + Vec3::splat(0.5)),
+        })
     }
 }
 
@@ -314,16 +326,26 @@ impl<S: AsRef<[Macrocell]> + AsMut<[Macrocell]>> MacrocellGrid<S> {
     /// D. Cohen, Z. Sheffer, "Proximity clouds: an acceleration technique for 3D grid traversal",
     /// The Visual Computer 11, 1994). Two raster passes over the 26-neighbourhood compute it.
     pub fn classify(&mut self, tf: &TransferFunction<'_>) {
+        self.classify_by(tf.fingerprint(), |min, max| tf.is_transparent(min, max));
+    }
+
+    /// [`classify`](Self::classify) for the pre-integrated marchers: a block is empty where every
+    /// segment between values of its range has zero extinction in `table`
+    /// ([`PreintegratedTable::is_transparent`]); remembers `table`'s fingerprint, which
+    /// [`PreintegratedMedium::with_grid`](super::PreintegratedMedium::with_grid) checks (and which
+    /// no transfer function's fingerprint equals, so a grid classified for one kind of marcher is
+    /// refused by the other).
+    pub fn classify_preintegrated<T: AsRef<[TfEntry]>>(&mut self, table: &PreintegratedTable<T>) {
+        self.classify_by(table.fingerprint(), |min, max| table.is_transparent(min, max));
+    }
+
+    fn classify_by(&mut self, fingerprint: u64, transparent: impl Fn(f32, f32) -> bool) {
         let n = self.len();
         let [mx, my, mz] = self.mdims.map(|d| d as i64);
         let cells = &mut self.cells.as_mut()[..n];
         for m in cells.iter_mut() {
             // NaN or infinite voxels made min = -inf, max = +inf: the whole table is checked.
-            m.empty = if tf.is_transparent(m.min, m.max) {
-                MAX_EMPTY_RADIUS
-            } else {
-                0
-            };
+            m.empty = if transparent(m.min, m.max) { MAX_EMPTY_RADIUS } else { 0 };
         }
         let idx = |x: i64, y: i64, z: i64| (x + mx * (y + my * z)) as usize;
         // Forward pass: neighbours before (x, y, z) in raster order; backward: after.
@@ -350,7 +372,7 @@ impl<S: AsRef<[Macrocell]> + AsMut<[Macrocell]>> MacrocellGrid<S> {
                 }
             }
         }
-        self.classified = Some(tf.fingerprint());
+        self.classified = Some(fingerprint);
     }
 }
 
