@@ -74,6 +74,21 @@ pub fn abs(x: f32) -> f32 {
     f32::from_bits(x.to_bits() & 0x7fff_ffff)
 }
 
+/// `ceil(x)`: `std`'s where the crate has it (one instruction with SSE4.1), else `libm`'s; the
+/// same IEEE result either way.
+///
+/// ```
+/// assert_eq!(strahl::math::ceil(2.25), 3.0);
+/// assert_eq!(strahl::math::ceil(-2.25), -2.0);
+/// ```
+#[inline(always)]
+pub fn ceil(x: f32) -> f32 {
+    #[cfg(feature = "std")]
+    return x.ceil();
+    #[cfg(not(feature = "std"))]
+    return libm::ceilf(x);
+}
+
 /// `true` if the sign bit of `x` is set (also for `-0.0` and negative NaNs).
 #[inline(always)]
 pub fn sign_bit(x: f32) -> bool {

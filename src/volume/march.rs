@@ -5,7 +5,7 @@ use super::medium::{EmptyRegion, Lookup, Medium};
 use super::preint::PreintegratedMedium;
 use super::{Rgba, VolumeError, Voxel};
 use crate::geometry::{Aabb, Ray};
-use crate::math::{Lane, abs, f32x8, max_l, min_l, sign_bit};
+use crate::math::{Lane, abs, ceil, f32x8, max_l, min_l, sign_bit};
 use glam::Vec3;
 
 /// Default [`MarchParams::max_steps`]: `2^16` samples per ray, enough for a step of a quarter
@@ -227,7 +227,7 @@ impl Ctx {
         let gd = (u * self.scale).to_array();
         let q = len / self.dt;
         let (n, truncated) = if q <= self.max_steps as f32 {
-            (libm::ceilf(q) as u32, false)
+            (ceil(q) as u32, false)
         } else {
             (self.max_steps, true)
         };
@@ -285,7 +285,7 @@ impl Ctx {
         let s_exit = exit_distance(sp, r);
         // Sample positions are k dt (endpoint) or k dt + dt / 2 (midpoint, full steps).
         let q = s_exit * self.inv_dt - if self.mid { 0.5 } else { 0.0 };
-        let kn = if q < sp.n as f32 { libm::ceilf(q) as u32 } else { sp.n };
+        let kn = if q < sp.n as f32 { ceil(q) as u32 } else { sp.n };
         let kn = kn.clamp(k + 1, sp.n.max(k + 1));
         if kn > k + 1 {
             let inside = |g: [f32; 3]| r.safe.contains_point(Vec3::from_array(g));
@@ -306,7 +306,7 @@ impl Ctx {
         // Lattice point j (position j dt) lies before the exit for j < q; step j ends at j + 1.
         let q = exit_distance(sp, r) * self.inv_dt;
         let kn = if q < sp.n as f32 {
-            (libm::ceilf(q) as u32).saturating_sub(1)
+            (ceil(q) as u32).saturating_sub(1)
         } else {
             sp.n
         };
@@ -512,9 +512,9 @@ const PREFETCH_STEPS: f32 = 6.0;
 
 #[inline(always)]
 fn set_lane(v: &mut f32x8, l: usize, x: f32) {
-    let mut a = v.to_array();
-    a[l] = x;
-    *v = f32x8::new(a);
+    // PERF: a blend, not a trip through memory (a store of the vector, one lane, a reload).
+    let lane = f32x8::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]).eq(f32x8::splat(l as f32));
+    *v = lane.select(f32x8::splat(x), *v);
 }
 
 /// What the 8-wide marcher updates every step, one ray per lane, in SoA form.

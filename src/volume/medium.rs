@@ -239,18 +239,20 @@ impl<V: Voxel> Medium for VolumeMedium<'_, V> {
         }
         let cell = self.vol.cell_x8(*g);
         if let Some(grid) = &self.grid {
-            let mut skip = 0;
-            for (l, e) in empty.iter_mut().enumerate() {
-                if active >> l & 1 == 0 {
-                    continue;
+            let mut bits = grid.empty_mask_x8(&cell.idx, active);
+            if bits != 0 {
+                let mut skip = 0;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    if let Some(r) = grid.empty_region([cell.idx[0][l], cell.idx[1][l], cell.idx[2][l]]) {
+                        empty[l] = r;
+                        skip |= 1 << l;
+                    }
                 }
-                if let Some(r) = grid.empty_region([cell.idx[0][l], cell.idx[1][l], cell.idx[2][l]]) {
-                    *e = r;
-                    skip |= 1 << l;
+                if skip != 0 {
+                    return Err(skip);
                 }
-            }
-            if skip != 0 {
-                return Err(skip);
             }
         }
         let s = self.vol.interp_x8(&cell);

@@ -661,8 +661,8 @@ impl<'a, V: Voxel> PreintegratedMedium<'a, V> {
             return 0;
         }
         let cell = self.vol.cell_x8(g);
+        let mut bits = grid.empty_mask_x8(&cell.idx, active);
         let mut mask = 0;
-        let mut bits = active;
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;

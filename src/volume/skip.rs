@@ -37,6 +37,7 @@
 
 use super::{EmptyRegion, PreintegratedTable, TfEntry, TransferFunction, Volume, VolumeError, Voxel};
 use crate::geometry::Aabb;
+use crate::math::i32x8;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
@@ -159,6 +160,26 @@ impl<'a> GridView<'a> {
             (m[2] + r + 1).min(self.mdims[2]) as f32,
         );
         Some(Aabb::new(lo * b, hi * b))
+    }
+
+    /// Of the `active` lanes among eight cells (`idx[axis][lane]`, in the volume), those whose
+    /// macrocell is empty: one index computation 8-wide and eight loads, no branch per lane.
+    // PERF: the per-lane `region` call on every step was about 30% of the x8 marcher's time on the
+    // sparse torus bench (`volume_skipping`), where most steps are in non-empty blocks.
+    #[inline(always)]
+    pub(crate) fn empty_mask_x8(&self, idx: &[[i32; 8]; 3], active: u32) -> u32 {
+        let shift = self.shift;
+        let m = idx.map(|a| i32x8::new(a) >> shift);
+        // Cells are within the volume, so the linear index is below the number of macrocells
+        // (< 2^31, as voxels are).
+        let k = (m[0] + i32x8::splat(self.mdims[0] as i32) * (m[1] + i32x8::splat(self.mdims[1] as i32) * m[2]))
+            .to_array();
+        let mut mask = 0;
+        for (l, &k) in k.iter().enumerate() {
+            let e = self.cells.get(k as u32 as usize).map_or(0, |c| c.empty);
+            mask |= ((e != 0) as u32) << l;
+        }
+        mask & active
     }
 
     /// The exit box of a region: the blocks, clipped to the volume.
