@@ -357,9 +357,9 @@ impl Ctx {
                 return kn;
             }
             let gn = self.position(sp, kn).0;
-            match m.lookup(Vec3::from_array(gn)) {
-                Lookup::Empty(next) => (k, g, r) = (kn, gn, next),
-                Lookup::Sample(_) => return kn,
+            match m.empty_region(Vec3::from_array(gn)) {
+                Some(next) => (k, g, r) = (kn, gn, next),
+                None => return kn,
             }
         }
     }

@@ -93,6 +93,18 @@ pub trait Medium {
     /// Extinction and colour at local position `g`, or the empty region around it.
     fn lookup(&self, g: Vec3) -> Lookup;
 
+    /// The empty region around local position `g`, if [`lookup`](Self::lookup) would report one
+    /// there (and `None` exactly where it would return a sample). The marcher asks this while it
+    /// jumps across regions, where the sample itself is not needed; the default calls `lookup`,
+    /// a medium that can answer without sampling (as [`VolumeMedium`] does) overrides it.
+    #[inline]
+    fn empty_region(&self, g: Vec3) -> Option<EmptyRegion> {
+        match self.lookup(g) {
+            Lookup::Empty(r) => Some(r),
+            Lookup::Sample(_) => None,
+        }
+    }
+
     /// A hint: asks the cache for what [`lookup_x8`](Self::lookup_x8) at `g` will read, a few
     /// steps before it does. Changes no result; the default does nothing. [`integrate_x8`](super::integrate_x8)
     /// calls it every second step for the positions six steps ahead; a medium over memory the
@@ -224,6 +236,15 @@ impl<V: Voxel> Medium for VolumeMedium<'_, V> {
         let s = self.vol.interp_scalar(&cell);
         let (tau, color) = self.tf.lookup_scalar(s);
         Lookup::Sample(Sample { tau, color })
+    }
+
+    #[inline(always)]
+    fn empty_region(&self, g: Vec3) -> Option<EmptyRegion> {
+        let grid = self.grid.as_ref()?;
+        if self.vol.is_empty() {
+            return None;
+        }
+        grid.empty_region(self.vol.cell_scalar(g).idx)
     }
 
     #[inline(always)]
