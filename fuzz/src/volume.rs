@@ -682,7 +682,10 @@ fn check_preintegrated<V: FuzzVoxel>(
     }
     assert_eq!(sc, sd, "pre-integrated skipping counters");
     assert_eq!(sa.samples, sc.samples + sc.skipped);
-    assert_eq!((sa.rays, sa.terminated, sa.truncated), (sc.rays, sc.terminated, sc.truncated));
+    assert_eq!(
+        (sa.rays, sa.terminated, sa.truncated),
+        (sc.rays, sc.terminated, sc.truncated)
+    );
     if p.termination.is_none() {
         assert_eq!(sa.samples, riemann.samples);
     }
@@ -814,6 +817,14 @@ fn check_lookups<V: FuzzVoxel>(m: &VolumeMedium<'_, V>, plain: &VolumeMedium<'_,
     let g: [f32x8; 3] = core::array::from_fn(|a| f32x8::new(points.map(|p| p[a])));
     let mut empty = [EmptyRegion::default(); 8];
     let scalar = points.map(|p| m.lookup(p));
+    // The cheap answer the marcher uses while jumping agrees with the full lookup.
+    for (p, l) in points.iter().zip(&scalar) {
+        let want = match l {
+            Lookup::Empty(r) => Some(*r),
+            Lookup::Sample(_) => None,
+        };
+        assert_eq!(m.empty_region(*p), want, "empty_region at {p}");
+    }
     match m.lookup_x8(&g, active, &mut empty) {
         Ok(s) => {
             let (tau, col) = (s.tau.to_array(), s.color.map(|c| c.to_array()));

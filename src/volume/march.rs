@@ -961,30 +961,40 @@ fn skip_lanes<V: Voxel>(
         return false;
     }
     let mut moved = false;
-    let pos = fpos.map(|p| p.to_array());
-    let ks = v.k.to_array();
     while bits != 0 {
         let l = bits.trailing_zeros() as usize;
         bits &= bits - 1;
-        let (fp, r) = ([pos[0][l], pos[1][l], pos[2][l]], regions[l]);
-        let (k, sp) = (ks[l] as u32, ln.span[l]);
-        let kn = ctx.skip_segments(m, &sp, k, fp, &r);
-        if kn <= k {
-            continue;
-        }
-        moved = true;
-        stats.skipped += (kn - k) as u64;
-        set_lane(&mut v.k, l, kn as f32);
-        if kn >= sp.n {
+        let mut r = regions[l];
+        loop {
+            let fp = [fpos[0].lane(l), fpos[1].lane(l), fpos[2].lane(l)];
+            let (k, sp) = (v.k.lane(l) as u32, ln.span[l]);
+            let kn = ctx.skip_segments(m, &sp, k, fp, &r);
+            if kn <= k {
+                break;
+            }
+            moved = true;
+            stats.skipped += (kn - k) as u64;
+            set_lane(&mut v.k, l, kn as f32);
+            if kn < sp.n {
+                let g = ctx.end_position(&sp, kn - 1).0;
+                set_lane(front, l, m.scalar(g));
+                for (p, x) in fpos.iter_mut().zip(g) {
+                    set_lane(p, l, x);
+                }
+                break;
+            }
+            // The ray is done: the lane takes the next one, whose start may be empty too (the
+            // scalar marcher skips from a ray's first step; so must this, for the same counters).
             ln.v = *v;
             ln.finish_and_refill(l, ctx, rays, out, next, stats);
             *v = ln.v;
             start_lane(m, &ln.span[l], l, front, fpos);
-        } else {
-            let g = ctx.end_position(&sp, kn - 1).0;
-            set_lane(front, l, m.scalar(g));
-            for (p, x) in fpos.iter_mut().zip(g) {
-                set_lane(p, l, x);
+            if ln.span[l].n == 0 {
+                break;
+            }
+            match m.empty_region(ln.span[l].ge) {
+                Some(next_r) => r = next_r,
+                None => break,
             }
         }
     }

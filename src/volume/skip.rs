@@ -172,8 +172,8 @@ impl<'a> GridView<'a> {
         let m = idx.map(|a| i32x8::new(a) >> shift);
         // Cells are within the volume, so the linear index is below the number of macrocells
         // (< 2^31, as voxels are).
-        let k = (m[0] + i32x8::splat(self.mdims[0] as i32) * (m[1] + i32x8::splat(self.mdims[1] as i32) * m[2]))
-            .to_array();
+        let k =
+            (m[0] + i32x8::splat(self.mdims[0] as i32) * (m[1] + i32x8::splat(self.mdims[1] as i32) * m[2])).to_array();
         let mut mask = 0;
         for (l, &k) in k.iter().enumerate() {
             let e = self.cells.get(k as u32 as usize).map_or(0, |c| c.empty);
