@@ -129,7 +129,7 @@ pub use march::{
     integrate_preintegrated_scalar, integrate_preintegrated_x8, integrate_ray, integrate_scalar, integrate_x8,
 };
 pub use medium::{EmptyRegion, Lookup, Medium, Sample, SampleX8, VolumeMedium};
-pub use preint::{PREINTEGRATED_MAX_RES, PreintegratedMedium, PreintegratedTable};
+pub use preint::{PREINTEGRATED_MAX_RES, PREINTEGRATED_MAX_WORK, PreintegratedMedium, PreintegratedTable};
 pub use skip::{GridParams, MAX_EMPTY_RADIUS, Macrocell, MacrocellGrid};
 pub use transfer::{COLOR_MAX, TAU_MAX, TfEntry, TransferFunction, correct_opacity};
 
@@ -241,7 +241,8 @@ pub enum VolumeError {
     /// A macrocell grid not classified, or classified with a transfer function whose transparent
     /// entries or value range differ from the one in use: call [`MacrocellGrid::classify`] again.
     StaleGrid,
-    /// A pre-integrated table's resolution outside `2..=`[`PREINTEGRATED_MAX_RES`].
+    /// A pre-integrated table's resolution outside `2..=`[`PREINTEGRATED_MAX_RES`], or so high for
+    /// the transfer function's length that the build would exceed [`PREINTEGRATED_MAX_WORK`].
     InvalidResolution,
     /// A pre-integrated table built for another step than [`MarchParams::step`]: build it for
     /// that step ([`PreintegratedTable::build`]).
@@ -290,7 +291,7 @@ impl fmt::Display for VolumeError {
             Self::InvalidResolution => {
                 write!(
                     f,
-                    "pre-integrated table resolution must lie in 2..={PREINTEGRATED_MAX_RES}"
+                    "pre-integrated table resolution must lie in 2..={PREINTEGRATED_MAX_RES}, with res^2 x (entries - 1) at most {PREINTEGRATED_MAX_WORK}"
                 )
             }
             Self::StepMismatch => write!(

@@ -46,8 +46,12 @@
 //!
 //! # Cost
 //! Building a table costs about `res^2` times the number of transfer-function intervals a segment
-//! crosses, times 4 exponentials: some 0.1 s for `256^2` entries over a 256-entry transfer
-//! function, and it must be redone when the transfer function or the step changes. Marching costs
+//! crosses (those with extinction cost about eight times those without, which are only summed):
+//! 0.25 to 0.4 s for `256^2` entries over a 256-entry transfer function with extinction
+//! everywhere, 60 ms where most entries are clear (one thread, AMD EPYC), and it must be redone
+//! when the transfer function or the step changes. So that a build always ends in reasonable time,
+//! `res^2 (entries - 1)` is capped at [`PREINTEGRATED_MAX_WORK`] (a 512^2 table over 4097
+//! entries; tens of seconds at most). Marching costs
 //! one trilinear sample per step (the back sample of one step is the front sample of the next)
 //! and a bilinear lookup in the table instead of a linear one.
 //!
@@ -69,8 +73,12 @@ use crate::math::{Lane, abs, f32x8, i32x8, max_l, min_l};
 use glam::Vec3;
 
 /// Largest table resolution (nodes per axis): `512`, so a table holds at most `2^18` entries
-/// (4 MB) and builds in seconds at most.
+/// (4 MB).
 pub const PREINTEGRATED_MAX_RES: u32 = 512;
+
+/// Largest `res^2 (entries - 1)` a table may be built for (`2^30`): the intervals its segments
+/// walk, which bounds the build time (see the module docs).
+pub const PREINTEGRATED_MAX_WORK: u64 = 1 << 30;
 
 /// Optical depth per quadrature piece (see the module docs).
 const PIECE_DEPTH: f64 = 0.25;
@@ -135,13 +143,16 @@ impl<S: AsRef<[TfEntry]> + AsMut<[TfEntry]>> PreintegratedTable<S> {
     /// axis, in `storage` (at least `res * res` entries; the first `res * res` are used).
     ///
     /// Errors: [`VolumeError::InvalidStep`] unless `step` is finite and positive,
-    /// [`VolumeError::InvalidResolution`] unless `res` lies in `2..=`[`PREINTEGRATED_MAX_RES`],
-    /// [`VolumeError::StorageTooSmall`].
+    /// [`VolumeError::InvalidResolution`] unless `res` lies in `2..=`[`PREINTEGRATED_MAX_RES`] and
+    /// `res^2 (entries - 1)` is at most [`PREINTEGRATED_MAX_WORK`], [`VolumeError::StorageTooSmall`].
     pub fn build_in(tf: &TransferFunction<'_>, step: f32, res: u32, mut storage: S) -> Result<Self, VolumeError> {
         if !(step.is_finite() && step > 0.0) {
             return Err(VolumeError::InvalidStep);
         }
         let n = len_for(res)?;
+        if n as u64 * (tf.entries().len() as u64 - 1) > PREINTEGRATED_MAX_WORK {
+            return Err(VolumeError::InvalidResolution);
+        }
         let out = storage.as_mut();
         if out.len() < n {
             return Err(VolumeError::StorageTooSmall {
@@ -233,8 +244,9 @@ impl<S: AsRef<[TfEntry]>> PreintegratedTable<S> {
     }
 
     /// A hash of what [`is_transparent`](Self::is_transparent) depends on (the transfer
-    /// function's [fingerprint](TransferFunction::fingerprint) and the resolution), never equal to
-    /// a transfer function's own: what [`MacrocellGrid::classify_preintegrated`] remembers.
+    /// function's [fingerprint](TransferFunction::fingerprint) and the resolution, hashed on with
+    /// a tag), so it differs from any transfer function's own (but for a 64-bit hash collision):
+    /// what [`MacrocellGrid::classify_preintegrated`] remembers.
     ///
     /// [`MacrocellGrid::classify_preintegrated`]: super::MacrocellGrid::classify_preintegrated
     #[inline]
@@ -244,7 +256,7 @@ impl<S: AsRef<[TfEntry]>> PreintegratedTable<S> {
 
     /// `true` if every segment whose values both lie in `[min, max]` looks up zero extinction.
     /// Conservative as [`TransferFunction::is_transparent`]: the range is padded by
-    /// `(|min| + |max|) 2^-16` first; then the nodes a lookup in it can read span `i..=j`, and the
+    /// `(|min| + |max|) 2^-16 + f32::MIN_POSITIVE` first; then the nodes a lookup in it can read span `i..=j`, and the
     /// widest segment among them, entry `(i, j)`, has zero mean extinction only if the transfer
     /// function has none anywhere between (a positive mean never rounds to zero in the table), so
     /// neither has any segment in between. A NaN bound, or `min > max`, checks the whole range.
@@ -743,6 +755,16 @@ mod tests {
                 VolumeError::InvalidResolution
             );
         }
+        // The work cap: a 512^2 table over 4098 entries is refused (4097 is exactly at the cap),
+        // a small table over them is not.
+        let big = vec![TfEntry::TRANSPARENT; 4098];
+        let tf_big = TransferFunction::new(&big, 0.0, 1.0).unwrap();
+        assert_eq!(
+            PreintegratedTable::build(&tf_big, 0.1, 512).map(|_| ()),
+            Err(VolumeError::InvalidResolution)
+        );
+        assert_eq!(512u64 * 512 * 4096, PREINTEGRATED_MAX_WORK);
+        assert!(PreintegratedTable::build(&tf_big, 0.1, 16).is_ok());
         let mut small = vec![TfEntry::TRANSPARENT; 15];
         assert_eq!(
             PreintegratedTable::build_in(&tf, 0.1, 4, &mut small[..]).unwrap_err(),
