@@ -169,7 +169,7 @@ mod gather {
     // PERF: on an Intel Xeon (AVX-512 machine, AVX2 gathers) the x8 marcher over a dense `f32`
     // volume ran 2.3x its scalar reference with 64 scalar loads per step and 3.4x with the
     // gathers; an earlier measurement on an AMD EPYC (Zen 3, slow gathers) found no difference.
-    #[cfg(not(target_feature = "avx512f"))]
+    // Also the AVX-512 build's choice on every processor but AMD's ([`pairs_preferred`]).
     #[inline(always)]
     pub(super) fn corners_f32(data: &[f32], base: i32x8, oy: i32, oz: i32) -> [f32x8; 8] {
         let n = data.len();
@@ -190,6 +190,36 @@ mod gather {
             row(oz + oy),
             row(oz + oy + 1),
         ]
+    }
+
+    /// How an AVX-512 build gathers `f32` corners: 1 as 64-bit pairs ([`corners_f32_pairs`]), 2
+    /// one voxel per element ([`corners_f32`]), 0 not yet decided.
+    #[cfg(target_feature = "avx512f")]
+    pub(super) static F32_GATHER: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
+
+    /// `true` where `f32` corners are best gathered as 64-bit pairs: on AMD processors.
+    // PERF: dense f32 Marschner-Lobb 128^3, x8 (`volume_x8_vs_scalar`): on an Intel Xeon
+    // (Emerald Rapids, 2026-12-04; best of 5 x 3 rounds, taking turns) the pairs took 22.5 ms and
+    // the eight 32-bit gathers 17.0 ms; on an AMD EPYC (Zen 4) the pairs were 13% faster (see
+    // `corners_f32_pairs`). The vendor is read once (cpuid leaf 0), then one relaxed load per call.
+    #[cfg(target_feature = "avx512f")]
+    #[inline(always)]
+    pub(super) fn pairs_preferred() -> bool {
+        use core::sync::atomic::Ordering::Relaxed;
+        match F32_GATHER.load(Relaxed) {
+            1 => true,
+            2 => false,
+            _ => {
+                // SAFETY: every x86_64 processor has `cpuid`, and leaf 0 always exists. (The
+                // intrinsic is a safe function on newer compilers, hence the allow.)
+                #[allow(unused_unsafe)]
+                let id = unsafe { core::arch::x86_64::__cpuid(0) };
+                // "AuthenticAMD" in ebx, edx, ecx.
+                let amd = (id.ebx, id.edx, id.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163);
+                F32_GATHER.store(if amd { 1 } else { 2 }, Relaxed);
+                amd
+            }
+        }
     }
 
     /// [`Voxel::corners_x8`](super::Voxel::corners_x8) for `f32` with AVX-512: each x pair of
@@ -256,8 +286,10 @@ impl Voxel for f32 {
     #[inline(always)]
     fn corners_x8(data: &[Self], base: i32x8, oy: usize, oz: usize) -> [f32x8; 8] {
         #[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
-        return gather::corners_f32_pairs(data, base, oy as i32, oz as i32);
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx2", not(target_feature = "avx512f")))]
+        if gather::pairs_preferred() {
+            return gather::corners_f32_pairs(data, base, oy as i32, oz as i32);
+        }
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
         return gather::corners_f32(data, base, oy as i32, oz as i32);
         #[allow(unreachable_code)]
         {
@@ -753,8 +785,8 @@ mod tests {
         assert_eq!(one.bounds(), Aabb::new(Vec3::ZERO, Vec3::ZERO));
     }
     /// Every small shape (1, 2, 3 or 5 voxels per axis), every voxel type: the x8 sampler (with
-    /// the AVX2 gathers of `u8`/`u16` pairs where the build has AVX2, the 64-bit gathers of `f32`
-    /// pairs where it has AVX-512, and the pair loads elsewhere) equals the scalar reference bit
+    /// the AVX2 gathers of `u8`/`u16` pairs where the build has AVX2, both `f32` gathers (of
+    /// 64-bit pairs and of single voxels) where it has AVX-512, and the pair loads elsewhere) equals the scalar reference bit
     /// for bit, including the last cells of the volume, where a gather of 4 or 8 bytes would run
     /// past its end if the offsets were wrong. Every x8 march test also runs the prefetches.
     #[test]
@@ -798,5 +830,13 @@ mod tests {
         check(|x| x as u8);
         check(|x| x as u16);
         check(|x| (x % 1000) as f32 * 0.37);
+        // Both f32 gathers of an AVX-512 build, whichever this processor gets (other tests
+        // running meanwhile see the same bits either way).
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
+        for choice in [1, 2] {
+            gather::F32_GATHER.store(choice, core::sync::atomic::Ordering::Relaxed);
+            check(|x| (x % 1000) as f32 * 0.37);
+            check(|x| f32::from_bits(x.wrapping_mul(0x9e37_79b9) & 0x807f_ffff | 0x3f00_0000));
+        }
     }
 }
