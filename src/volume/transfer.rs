@@ -240,22 +240,11 @@ impl<'a> TransferFunction<'a> {
             .min_l(f32x8::splat(self.last));
         let j = u.fast_trunc_int().min(i32x8::splat(self.last_idx - 1));
         let w = u - j.round_float();
-        let j = j.to_array();
-        // PERF: entries j and j + 1 are 8 adjacent floats: one unaligned load per lane, then an
-        // 8 x 8 transpose gives r0, g0, b0, tau0, r1, g1, b1, tau1 across the lanes.
         let e = self.entries;
         if e.len() < 2 {
             return (f32x8::splat(0.0), [f32x8::splat(0.0); 3]); // unreachable: last_idx > 0
         }
-        // NOTE: the clamp never moves a row (j <= n - 2); it only lets the compiler drop the
-        // bounds checks.
-        let jmax = e.len() - 2;
-        let row = |l: usize| {
-            let i = (j[l] as u32 as usize).min(jmax);
-            f32x8::new(bytemuck::cast::<[TfEntry; 2], [f32; 8]>([e[i], e[i + 1]]))
-        };
-        let rows = [row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7)];
-        let [r0, g0, b0, t0, r1, g1, b1, t1] = f32x8::transpose(rows);
+        let [r0, g0, b0, t0, r1, g1, b1, t1] = pair_columns(e, j.to_array());
         let l = |a: f32x8, b: f32x8| a + (b - a) * w;
         (l(t0, t1), [l(r0, r1), l(g0, g1), l(b0, b1)])
     }
@@ -298,6 +287,71 @@ impl<'a> TransferFunction<'a> {
             eat(bits);
         }
         h
+    }
+}
+
+/// The entries `j[l]` and `j[l] + 1` of every lane `l`, as columns: `r0, g0, b0, tau0, r1, g1, b1,
+/// tau1` across the lanes. Every `j[l]` is clamped to `0..=len - 2` (the callers' indices are in
+/// range already; the clamp keeps every read in `e`). Needs `e.len() >= 2`.
+#[inline(always)]
+fn pair_columns(e: &[TfEntry], j: [i32; 8]) -> [f32x8; 8] {
+    let jmax = e.len().saturating_sub(2);
+    let at = |l: usize| (j[l] as u32 as usize).min(jmax);
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    {
+        // PERF: entry j of lanes l and l + 4 loaded into the halves of one register (the insert
+        // from memory runs beside the shuffle port), then a 4 x 4 transpose within the halves:
+        // 16 shuffles instead of the 24 of an 8 x 8 transpose of eight 32-byte rows. Dense
+        // Marschner-Lobb 128^3, x8, best of 5 x 6 rounds taking turns (Intel Xeon, 2026-12-04):
+        // 2 to 3% faster on u8, u16 and f32 voxels.
+        use core::arch::x86_64::{
+            __m256, _mm_loadu_ps, _mm256_castps128_ps256, _mm256_insertf128_ps, _mm256_shuffle_ps, _mm256_unpackhi_ps,
+            _mm256_unpacklo_ps,
+        };
+        if e.len() < 2 {
+            return [f32x8::splat(0.0); 8];
+        }
+        let p = e.as_ptr().cast::<f32>();
+        let i = [at(0), at(1), at(2), at(3), at(4), at(5), at(6), at(7)];
+        // SAFETY: `avx` is enabled for the whole build. Each read is the four floats of entry
+        // `i[l] + o` (o = 0 or 1) with `i[l] <= len - 2`, so inside `e` (`TfEntry` is four `f32`,
+        // `repr(C)`); the loads have no alignment requirement.
+        unsafe {
+            let pair = |a: usize, b: usize, o: usize| -> __m256 {
+                let lo = _mm_loadu_ps(p.add(4 * (a + o)));
+                _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(lo), _mm_loadu_ps(p.add(4 * (b + o))))
+            };
+            let t4 = |o: usize| -> [f32x8; 4] {
+                let (u0, u1, u2, u3) = (
+                    pair(i[0], i[4], o),
+                    pair(i[1], i[5], o),
+                    pair(i[2], i[6], o),
+                    pair(i[3], i[7], o),
+                );
+                let (a0, a1) = (_mm256_unpacklo_ps(u0, u1), _mm256_unpackhi_ps(u0, u1));
+                let (a2, a3) = (_mm256_unpacklo_ps(u2, u3), _mm256_unpackhi_ps(u2, u3));
+                [
+                    bytemuck::cast(_mm256_shuffle_ps::<0x44>(a0, a2)),
+                    bytemuck::cast(_mm256_shuffle_ps::<0xee>(a0, a2)),
+                    bytemuck::cast(_mm256_shuffle_ps::<0x44>(a1, a3)),
+                    bytemuck::cast(_mm256_shuffle_ps::<0xee>(a1, a3)),
+                ]
+            };
+            let ([r0, g0, b0, t0], [r1, g1, b1, t1]) = (t4(0), t4(1));
+            [r0, g0, b0, t0, r1, g1, b1, t1]
+        }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    {
+        // Entries j and j + 1 are 8 adjacent floats: one load per lane, then an 8 x 8 transpose.
+        let row = |l: usize| {
+            let i = at(l);
+            match (e.get(i), e.get(i + 1)) {
+                (Some(&a), Some(&b)) => f32x8::new(bytemuck::cast::<[TfEntry; 2], [f32; 8]>([a, b])),
+                _ => f32x8::splat(0.0), // unreachable: i <= len - 2
+            }
+        };
+        f32x8::transpose([row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7)])
     }
 }
 
