@@ -321,6 +321,49 @@ fn ball_tf() -> [TfEntry; 8] {
     t
 }
 
+/// A medium that only answers `lookup`, passing it on: the marchers go through the trait's
+/// default `lookup_x8` and `empty_region`.
+struct ScalarOnly<'a, M: Medium>(&'a M);
+
+impl<M: Medium> Medium for ScalarOnly<'_, M> {
+    fn bounds(&self) -> Aabb {
+        self.0.bounds()
+    }
+    fn local_frame(&self) -> (Vec3, Vec3) {
+        self.0.local_frame()
+    }
+    fn lookup(&self, g: Vec3) -> Lookup {
+        self.0.lookup(g)
+    }
+}
+
+/// Skipping through the trait's default `lookup_x8` (one lookup per lane, empty lanes reported
+/// together; the x8 marcher then asks again for the other lanes and jumps the empty ones beside
+/// them): the same image and counters as the scalar marcher and as the medium's own `lookup_x8`.
+#[test]
+fn skipping_through_the_default_lookup_x8() {
+    let n = 48;
+    let data = ball(n, 0.3);
+    let vol = unit_volume(&data, n);
+    let table = ball_tf();
+    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    let rays = test_rays(600);
+    for block in [2, 4, 8] {
+        let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+        grid.classify(&tf);
+        let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+        for p in [params(0.013, Sampling::Midpoint), params(0.02, Sampling::Endpoint)] {
+            let (a, sa) = both(&skipping, &rays, &p);
+            let (b, sb) = both(&ScalarOnly(&skipping), &rays, &p);
+            assert_eq!(sa, sb, "block {block}");
+            assert!(sb.skipped > 0);
+            for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+                assert!(x.bit_eq(y), "block {block} ray {i}: {x:?} vs {y:?}");
+            }
+        }
+    }
+}
+
 #[test]
 fn skipping_leaves_the_image_unchanged_bit_for_bit() {
     let n = 48;
