@@ -1,7 +1,7 @@
 //! The integrator: fixed-step front-to-back ray marching, scalar reference and 8 rays at once.
 
 use super::exp::{one_minus_exp_neg_scalar, one_minus_exp_neg_x8};
-use super::medium::{EmptyRegion, Lookup, Medium, SampleX8};
+use super::medium::{EmptyRegion, Lookup, Medium};
 use super::preint::PreintegratedMedium;
 use super::{Rgba, VolumeError, Voxel};
 use crate::geometry::{Aabb, Ray};
@@ -685,38 +685,9 @@ pub fn integrate_x8<M: Medium>(
         // lane's whole loop of jumps, one serial chain of dependent loads and conversions after
         // another, while the other seven lanes waited; on the sparse torus bench the jumps were
         // about half of the time. Now they run beside the sampling of the other lanes.
-        let (smp, jumping) = match m.lookup_x8(&g, active, &mut regions) {
-            Ok(smp) => (smp, 0),
-            Err(mask) => {
-                let mask = mask & active;
-                let rest = active & !mask;
-                if rest == 0 {
-                    (
-                        SampleX8 {
-                            tau: zero,
-                            color: [zero; 3],
-                        },
-                        mask,
-                    )
-                } else {
-                    match m.lookup_x8(&g, rest, &mut regions) {
-                        Ok(smp) => (smp, mask),
-                        // Only a medium that answers differently when asked again gets here:
-                        // no lane samples this round; the ones found empty jump.
-                        Err(more) => (
-                            SampleX8 {
-                                tau: zero,
-                                color: [zero; 3],
-                            },
-                            mask | (more & rest) | (rest << 8),
-                        ),
-                    }
-                }
-            }
-        };
-        // Bits 8..16: lanes that neither sample nor jump this round (see above).
-        let sampling = active & !jumping & !(jumping >> 8);
-        let jumping = jumping & 0xff;
+        let (smp, jumping) = m.lookup_x8_partial(&g, active, &mut regions);
+        let jumping = jumping & active;
+        let sampling = active & !jumping;
         if sampling != 0 {
             let lanes = lane_mask(sampling);
             composite_x8(lanes, smp.tau, smp.color, h, &mut v);

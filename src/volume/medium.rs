@@ -148,6 +148,84 @@ pub trait Medium {
             color: col.map(f32x8::new),
         })
     }
+
+    /// Eight lookups that sample every `active` lane outside an empty region and report the
+    /// others: returns the samples and the mask of the `active` lanes in empty regions (their
+    /// regions written to `empty`; their sample lanes, and those of inactive lanes, are
+    /// unspecified). Must agree with [`lookup`](Self::lookup) lane by lane, bit for bit.
+    /// [`integrate_x8`](super::integrate_x8) calls this every step: the lanes in empty regions
+    /// jump while the others composite. The default asks [`lookup_x8`](Self::lookup_x8) again
+    /// for the lanes it did not find empty (and, should that still report empty lanes, looks
+    /// those up one by one). A medium may override it to find both in one pass.
+    ///
+    /// ```
+    /// use strahl::math::f32x8;
+    /// use strahl::volume::*;
+    /// use strahl::Vec3;
+    /// // 16^3 voxels, opaque only where x >= 12.
+    /// let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+    /// let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// grid.classify(&tf);
+    /// let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+    /// // Lane l at x = 2 l (local voxel coordinates), y = z = 8.
+    /// let g = [f32x8::new([0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0]), f32x8::splat(8.0), f32x8::splat(8.0)];
+    /// let mut regions = [EmptyRegion::default(); 8];
+    /// let (smp, empty) = m.lookup_x8_partial(&g, 0xff, &mut regions);
+    /// // Cells of x in 0..8 (two blocks of 4) reach voxels of x <= 8 only: transparent.
+    /// assert_eq!(empty, 0b0000_1111);
+    /// let tau = smp.tau.to_array();
+    /// for l in 4..8 {
+    ///     match m.lookup(Vec3::new(2.0 * l as f32, 8.0, 8.0)) {
+    ///         Lookup::Sample(s) => assert_eq!(s.tau.to_bits(), tau[l].to_bits()),
+    ///         Lookup::Empty(_) => panic!("lane {l} was sampled"),
+    ///     }
+    /// }
+    /// ```
+    // PERF: `VolumeMedium` keeps the default. An override computing the cells once (regions of
+    // the empty lanes, then samples of all) was 5% slower on the sparse torus (x8, best of 40,
+    // taking turns: 4.00 against 3.81 ms): the default's first call returns before sampling.
+    #[inline]
+    fn lookup_x8_partial(&self, g: &[f32x8; 3], active: u32, empty: &mut [EmptyRegion; 8]) -> (SampleX8, u32) {
+        let mask = match self.lookup_x8(g, active, empty) {
+            Ok(smp) => return (smp, 0),
+            Err(mask) => mask & active,
+        };
+        let rest = active & !mask;
+        let z = f32x8::splat(0.0);
+        if rest == 0 {
+            return (SampleX8 { tau: z, color: [z; 3] }, mask);
+        }
+        if let Ok(smp) = self.lookup_x8(g, rest, empty) {
+            return (smp, mask);
+        }
+        // Asked again, the medium found empty lanes it had not reported: one lane at a time.
+        let (x, y, zc) = (g[0].to_array(), g[1].to_array(), g[2].to_array());
+        let (mut tau, mut col, mut mask) = ([0.0f32; 8], [[0.0f32; 8]; 3], mask);
+        for l in (0..8).filter(|l| rest >> l & 1 != 0) {
+            match self.lookup(Vec3::new(x[l], y[l], zc[l])) {
+                Lookup::Sample(s) => {
+                    tau[l] = s.tau;
+                    for (c, sc) in col.iter_mut().zip(s.color) {
+                        c[l] = sc;
+                    }
+                }
+                Lookup::Empty(r) => {
+                    empty[l] = r;
+                    mask |= 1 << l;
+                }
+            }
+        }
+        (
+            SampleX8 {
+                tau: f32x8::new(tau),
+                color: col.map(f32x8::new),
+            },
+            mask,
+        )
+    }
 }
 
 /// A [`Volume`] seen through a [`TransferFunction`], optionally with a classified
