@@ -209,6 +209,17 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
                 kids[i] = n.left();
                 kids.insert(i + 1, n.right());
             }
+            // Children by decreasing surface area (stable): the any-hit traversal visits them in
+            // slot order, so the likeliest occluders come first.
+            // PERF: shadow rays to random points (BVH8, 262k rays, best of 6-8 taking turns, Intel
+            // Xeon): 1M sphereflake 153 -> 130 ms, bunny 48.4 -> 49.5 ms; closest hits alike.
+            let mut keyed = Vec::with_capacity(kids.len());
+            for &k in &kids {
+                keyed.push((half_area(&self.bnode(k)?.aabb()), k));
+            }
+            keyed.sort_by(|a, b| b.0.total_cmp(&a.0));
+            kids.clear();
+            kids.extend(keyed.into_iter().map(|(_, k)| k));
             let mut wide = WideNode::<L, N>::empty();
             let mut lo = [[f32::INFINITY; 8]; 3];
             let mut hi = [[f32::NEG_INFINITY; 8]; 3];

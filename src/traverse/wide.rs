@@ -162,7 +162,11 @@ pub fn occluded_prepared<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideR
     // Children are visited in slot order, not near to far (as Embree's any-hit traversal does):
     // a shadow ray starts at a surface, and the nearest child is mostly the geometry around its
     // origin, which it leaves without a hit. Measured on shadow rays to random points (BVH8,
-    // 262k rays, best of 5): 1.3x faster on the 1M sphereflake, the same on the bunny.
+    // 262k rays, best of 5): 1.3x faster on the 1M sphereflake, the same on the bunny. The
+    // collapse puts a node's children in decreasing surface area, so slot order tries the
+    // children a random ray most likely hits first (another 1.15x on the sphereflake).
+    // Nearest child first, the rest in slot order, measured 6% faster on the bunny (in cache)
+    // but 1.45x slower on the sphereflake: not kept.
     let mut stack = Stack::<STACK>::new();
     let mut cur = 0u32;
     let mut budget = bvh.nodes.len();
