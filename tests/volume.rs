@@ -364,6 +364,54 @@ fn skipping_through_the_default_lookup_x8() {
     }
 }
 
+/// A medium whose `lookup_x8` breaks its contract: of the empty lanes it reports only the
+/// lowest, and it samples nothing then. `lookup_x8_partial`'s default must still give the right
+/// answer for every lane (it falls back to `lookup`, one lane at a time).
+struct Stingy<'a, M: Medium>(&'a M);
+
+impl<M: Medium> Medium for Stingy<'_, M> {
+    fn bounds(&self) -> Aabb {
+        self.0.bounds()
+    }
+    fn local_frame(&self) -> (Vec3, Vec3) {
+        self.0.local_frame()
+    }
+    fn lookup(&self, g: Vec3) -> Lookup {
+        self.0.lookup(g)
+    }
+    fn lookup_x8(
+        &self,
+        g: &[strahl::math::f32x8; 3],
+        active: u32,
+        empty: &mut [EmptyRegion; 8],
+    ) -> Result<SampleX8, u32> {
+        self.0
+            .lookup_x8(g, active, empty)
+            .map_err(|mask| mask & mask.wrapping_neg())
+    }
+}
+
+#[test]
+fn skipping_through_a_medium_that_reports_empty_lanes_one_at_a_time() {
+    let n = 48;
+    let data = ball(n, 0.3);
+    let vol = unit_volume(&data, n);
+    let table = ball_tf();
+    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    let rays = test_rays(600);
+    let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    grid.classify(&tf);
+    let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+    let p = params(0.013, Sampling::Midpoint);
+    let (a, sa) = both(&skipping, &rays, &p);
+    let (b, sb) = both(&Stingy(&skipping), &rays, &p);
+    assert_eq!(sa, sb);
+    assert!(sb.skipped > 0);
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(x.bit_eq(y), "ray {i}: {x:?} vs {y:?}");
+    }
+}
+
 #[test]
 fn skipping_leaves_the_image_unchanged_bit_for_bit() {
     let n = 48;

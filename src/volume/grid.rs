@@ -209,9 +209,12 @@ mod gather {
         match F32_GATHER.load(Relaxed) {
             1 => true,
             2 => false,
+            // An SGX enclave faults on `cpuid`: take the 32-bit gathers there.
+            _ if cfg!(target_env = "sgx") => false,
             _ => {
-                // SAFETY: every x86_64 processor has `cpuid`, and leaf 0 always exists. (The
-                // intrinsic is a safe function on newer compilers, hence the allow.)
+                // SAFETY: every x86_64 processor has `cpuid` (enclaves, which fault on it, are
+                // excluded above), and leaf 0 always exists. (The intrinsic is a safe function on
+                // newer compilers, hence the allow.)
                 #[allow(unused_unsafe)]
                 let id = unsafe { core::arch::x86_64::__cpuid(0) };
                 // "AuthenticAMD" in ebx, edx, ecx.

@@ -5,7 +5,7 @@ use super::medium::{EmptyRegion, Lookup, Medium};
 use super::preint::PreintegratedMedium;
 use super::{Rgba, VolumeError, Voxel};
 use crate::geometry::{Aabb, Ray};
-use crate::math::{Lane, abs, ceil, f32x8, i32x8, max_l, min_l, sign_bit};
+use crate::math::{Lane, abs, ceil, f32x8, max_l, min_l, sign_bit};
 use glam::Vec3;
 
 /// Default [`MarchParams::max_steps`]: `2^16` samples per ray, enough for a step of a quarter
@@ -517,13 +517,6 @@ fn set_lane(v: &mut f32x8, l: usize, x: f32) {
     *v = lane.select(f32x8::splat(x), *v);
 }
 
-/// The lanes set in `bits` (bit `l` for lane `l`) as a mask vector.
-#[inline(always)]
-fn lane_mask(bits: u32) -> f32x8 {
-    let bit = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
-    bytemuck::cast::<i32x8, f32x8>((i32x8::splat(bits as i32) & bit).simd_eq(bit))
-}
-
 /// What the 8-wide marcher updates every step, one ray per lane, in SoA form.
 #[derive(Clone, Copy)]
 struct LaneVecs {
@@ -689,7 +682,7 @@ pub fn integrate_x8<M: Medium>(
         let jumping = jumping & active;
         let sampling = active & !jumping;
         if sampling != 0 {
-            let lanes = lane_mask(sampling);
+            let lanes = f32x8::from_bitmask(sampling);
             composite_x8(lanes, smp.tau, smp.color, h, &mut v);
             // Every lane with a ray is live here (finished ones were refilled at once), so k
             // steps without waiting for this step's opacity.
