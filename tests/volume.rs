@@ -337,33 +337,6 @@ impl<M: Medium> Medium for ScalarOnly<'_, M> {
     }
 }
 
-/// Skipping through the trait's default `lookup_x8` (one lookup per lane, empty lanes reported
-/// together; the x8 marcher then asks again for the other lanes and jumps the empty ones beside
-/// them): the same image and counters as the scalar marcher and as the medium's own `lookup_x8`.
-#[test]
-fn skipping_through_the_default_lookup_x8() {
-    let n = 48;
-    let data = ball(n, 0.3);
-    let vol = unit_volume(&data, n);
-    let table = ball_tf();
-    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
-    let rays = test_rays(600);
-    for block in [2, 4, 8] {
-        let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
-        grid.classify(&tf);
-        let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
-        for p in [params(0.013, Sampling::Midpoint), params(0.02, Sampling::Endpoint)] {
-            let (a, sa) = both(&skipping, &rays, &p);
-            let (b, sb) = both(&ScalarOnly(&skipping), &rays, &p);
-            assert_eq!(sa, sb, "block {block}");
-            assert!(sb.skipped > 0);
-            for (i, (x, y)) in a.iter().zip(&b).enumerate() {
-                assert!(x.bit_eq(y), "block {block} ray {i}: {x:?} vs {y:?}");
-            }
-        }
-    }
-}
-
 /// A medium whose `lookup_x8` breaks its contract: of the empty lanes it reports only the
 /// lowest, and it samples nothing then. `lookup_x8_partial`'s default must still give the right
 /// answer for every lane (it falls back to `lookup`, one lane at a time).
@@ -391,24 +364,41 @@ impl<M: Medium> Medium for Stingy<'_, M> {
     }
 }
 
+/// Skipping through the trait's defaults: `ScalarOnly` gets the default `lookup_x8` (one lookup
+/// per lane, empty lanes reported together) and `lookup_x8_partial` (which asks again for the
+/// other lanes); `Stingy` reaches the partial lookup's per-lane fallback. Both give the image and
+/// counters of the scalar marcher and of the medium's own `lookup_x8`.
 #[test]
-fn skipping_through_a_medium_that_reports_empty_lanes_one_at_a_time() {
+fn skipping_through_the_trait_defaults() {
+    fn same<M: Medium>(want: &(Vec<Rgba>, MarchStats), m: &M, rays: &[Ray], p: &MarchParams, what: &str) {
+        let (b, sb) = both(m, rays, p);
+        assert_eq!(want.1, sb, "{what}");
+        assert!(sb.skipped > 0, "{what}");
+        for (i, (x, y)) in want.0.iter().zip(&b).enumerate() {
+            assert!(x.bit_eq(y), "{what} ray {i}: {x:?} vs {y:?}");
+        }
+    }
     let n = 48;
     let data = ball(n, 0.3);
     let vol = unit_volume(&data, n);
     let table = ball_tf();
     let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
     let rays = test_rays(600);
-    let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
-    grid.classify(&tf);
-    let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
-    let p = params(0.013, Sampling::Midpoint);
-    let (a, sa) = both(&skipping, &rays, &p);
-    let (b, sb) = both(&Stingy(&skipping), &rays, &p);
-    assert_eq!(sa, sb);
-    assert!(sb.skipped > 0);
-    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
-        assert!(x.bit_eq(y), "ray {i}: {x:?} vs {y:?}");
+    for block in [2, 4, 8] {
+        let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+        grid.classify(&tf);
+        let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+        for p in [params(0.013, Sampling::Midpoint), params(0.02, Sampling::Endpoint)] {
+            let want = both(&skipping, &rays, &p);
+            same(
+                &want,
+                &ScalarOnly(&skipping),
+                &rays,
+                &p,
+                &format!("default, block {block}"),
+            );
+            same(&want, &Stingy(&skipping), &rays, &p, &format!("stingy, block {block}"));
+        }
     }
 }
 

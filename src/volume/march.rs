@@ -539,6 +539,32 @@ struct Lanes {
 }
 
 impl Lanes {
+    /// [`finish_and_refill`](Self::finish_and_refill) for every lane set in `done`, the marching
+    /// loop's register copy `v` written back around it; `started(span, lane)` after each refill.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn refill_done(
+        &mut self,
+        v: &mut LaneVecs,
+        done: u32,
+        ctx: &Ctx,
+        rays: &[Ray],
+        out: &mut [Rgba],
+        next: &mut usize,
+        stats: &mut MarchStats,
+        mut started: impl FnMut(&Span, usize),
+    ) {
+        self.v = *v;
+        let mut bits = done;
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            self.finish_and_refill(l, ctx, rays, out, next, stats);
+            started(&self.span[l], l);
+        }
+        *v = self.v;
+    }
+
     /// Writes lane `l`'s result and loads the next ray that overlaps the medium into it (writing
     /// [`Rgba::ZERO`] for the ones that do not); leaves the lane idle (`n = 0`) when none is left.
     fn finish_and_refill(
@@ -703,14 +729,7 @@ pub fn integrate_x8<M: Medium>(
         }
         let done = active & !(v.k.lt(v.n) & v.acc.lt(thr)).bitmask();
         if done != 0 {
-            ln.v = v;
-            let mut bits = done;
-            while bits != 0 {
-                let l = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
-            }
-            v = ln.v;
+            ln.refill_done(&mut v, done, &ctx, rays, out, &mut next, &mut stats, |_, _| {});
         }
     }
     Ok(stats)
@@ -917,15 +936,9 @@ pub fn integrate_preintegrated_x8<V: Voxel>(
         stats.samples += active.count_ones() as u64;
         let done = active & !(v.k.lt(v.n) & v.acc.lt(thr)).bitmask();
         if done != 0 {
-            ln.v = v;
-            let mut bits = done;
-            while bits != 0 {
-                let l = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                ln.finish_and_refill(l, &ctx, rays, out, &mut next, &mut stats);
-                start_lane(m, &ln.span[l], l, &mut front, &mut fpos);
-            }
-            v = ln.v;
+            ln.refill_done(&mut v, done, &ctx, rays, out, &mut next, &mut stats, |sp, l| {
+                start_lane(m, sp, l, &mut front, &mut fpos)
+            });
         }
     }
     Ok(stats)

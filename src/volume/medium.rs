@@ -119,34 +119,10 @@ pub trait Medium {
     /// `empty`). Must agree with [`lookup`](Self::lookup) lane by lane, bit for bit.
     #[inline]
     fn lookup_x8(&self, g: &[f32x8; 3], active: u32, empty: &mut [EmptyRegion; 8]) -> Result<SampleX8, u32> {
-        let (x, y, z) = (g[0].to_array(), g[1].to_array(), g[2].to_array());
-        let mut tau = [0.0f32; 8];
-        let mut col = [[0.0f32; 8]; 3];
-        let mut skip = 0;
-        for l in 0..8 {
-            if active >> l & 1 == 0 {
-                continue;
-            }
-            match self.lookup(Vec3::new(x[l], y[l], z[l])) {
-                Lookup::Sample(s) => {
-                    tau[l] = s.tau;
-                    for (c, sc) in col.iter_mut().zip(s.color) {
-                        c[l] = sc;
-                    }
-                }
-                Lookup::Empty(r) => {
-                    empty[l] = r;
-                    skip |= 1 << l;
-                }
-            }
+        match lookup_lanes(self, g, active, empty) {
+            (smp, 0) => Ok(smp),
+            (_, skip) => Err(skip),
         }
-        if skip != 0 {
-            return Err(skip);
-        }
-        Ok(SampleX8 {
-            tau: f32x8::new(tau),
-            color: col.map(f32x8::new),
-        })
     }
 
     /// Eight lookups that sample every `active` lane outside an empty region and report the
@@ -202,30 +178,43 @@ pub trait Medium {
             return (smp, mask);
         }
         // Asked again, the medium found empty lanes it had not reported: one lane at a time.
-        let (x, y, zc) = (g[0].to_array(), g[1].to_array(), g[2].to_array());
-        let (mut tau, mut col, mut mask) = ([0.0f32; 8], [[0.0f32; 8]; 3], mask);
-        for l in (0..8).filter(|l| rest >> l & 1 != 0) {
-            match self.lookup(Vec3::new(x[l], y[l], zc[l])) {
-                Lookup::Sample(s) => {
-                    tau[l] = s.tau;
-                    for (c, sc) in col.iter_mut().zip(s.color) {
-                        c[l] = sc;
-                    }
-                }
-                Lookup::Empty(r) => {
-                    empty[l] = r;
-                    mask |= 1 << l;
+        let (smp, more) = lookup_lanes(self, g, rest, empty);
+        (smp, mask | more)
+    }
+}
+
+/// `m.lookup` for each lane set in `lanes`: the samples (zero in the other lanes) and the mask
+/// of the lanes found empty, their regions written to `empty`.
+#[inline]
+fn lookup_lanes<M: Medium + ?Sized>(
+    m: &M,
+    g: &[f32x8; 3],
+    lanes: u32,
+    empty: &mut [EmptyRegion; 8],
+) -> (SampleX8, u32) {
+    let (x, y, z) = (g[0].to_array(), g[1].to_array(), g[2].to_array());
+    let (mut tau, mut col, mut skip) = ([0.0f32; 8], [[0.0f32; 8]; 3], 0);
+    for l in (0..8).filter(|l| lanes >> l & 1 != 0) {
+        match m.lookup(Vec3::new(x[l], y[l], z[l])) {
+            Lookup::Sample(s) => {
+                tau[l] = s.tau;
+                for (c, sc) in col.iter_mut().zip(s.color) {
+                    c[l] = sc;
                 }
             }
+            Lookup::Empty(r) => {
+                empty[l] = r;
+                skip |= 1 << l;
+            }
         }
-        (
-            SampleX8 {
-                tau: f32x8::new(tau),
-                color: col.map(f32x8::new),
-            },
-            mask,
-        )
     }
+    (
+        SampleX8 {
+            tau: f32x8::new(tau),
+            color: col.map(f32x8::new),
+        },
+        skip,
+    )
 }
 
 /// A [`Volume`] seen through a [`TransferFunction`], optionally with a classified
