@@ -130,7 +130,9 @@ pub trait Medium {
     /// regions written to `empty`; their sample lanes, and those of inactive lanes, are
     /// unspecified). Must agree with [`lookup`](Self::lookup) lane by lane, bit for bit.
     /// [`integrate_x8`](super::integrate_x8) calls this every step: the lanes in empty regions
-    /// jump while the others composite. The default asks [`lookup_x8`](Self::lookup_x8) again
+    /// jump while the others composite. It asks for a step's lookups before compositing the step
+    /// before, so a lane whose ray reaches the opacity threshold may be looked up once more past
+    /// its last step (that answer is not used). The default asks [`lookup_x8`](Self::lookup_x8) again
     /// for the lanes it did not find empty (and, should that still report empty lanes, looks
     /// those up one by one). A medium may override it to find both in one pass.
     ///
