@@ -1,8 +1,9 @@
 //! Speed harness for the volume marchers (ignored: run by hand).
 //!
 //! `cargo test --release --test volume_speed -- --ignored --nocapture speed`: the scenes of
-//! `benches/volume.rs` (dense Marschner-Lobb 128^3 as `u8`, `u16` and `f32` voxels; the sparse
-//! torus with and without its macrocell grid), 96x96 rays, step 1/2 voxel. Each contender runs
+//! `benches/volume.rs` (dense Marschner-Lobb 128^3 as `u8`, `u16` and `f32` voxels, Riemann and
+//! pre-integrated; the sparse torus with and without its macrocell grid), 96x96 rays, step 1/2
+//! voxel. Each contender runs
 //! `STRAHL_REPS` times (default 5) and keeps its best, taking turns with the others, for
 //! `STRAHL_ROUNDS` rounds (default 3); the table shows each contender's best over all rounds and
 //! the ratios of those. On a shared machine whose load changes from second to second, taking
@@ -38,6 +39,13 @@ fn pair<'a, M: Medium>(m: &'a M, p: &'a MarchParams) -> (Run<'a>, Run<'a>) {
     )
 }
 
+fn pre_pair<'a, V: Voxel>(m: &'a PreintegratedMedium<'a, V>, p: &'a MarchParams) -> (Run<'a>, Run<'a>) {
+    (
+        Box::new(move |r, o| integrate_preintegrated_scalar(m, r, o, p).unwrap()),
+        Box::new(move |r, o| integrate_preintegrated_x8(m, r, o, p).unwrap()),
+    )
+}
+
 #[test]
 #[ignore]
 fn speed() {
@@ -65,6 +73,15 @@ fn speed() {
     let skip = VolumeMedium::new(tvol, ttf).with_grid(&grid).unwrap();
     let p = MarchParams::reference(m8.volume().spacing().x * 0.5);
     let rays = pinhole_rays(Vec3::new(2.2, -2.9, 1.6), Vec3::ZERO, 36.0, 96, 96);
+    // Pre-integrated, tables of 256^2 at the same step (the u8 one also serves the f32 volume,
+    // whose values span the same range).
+    let (pre8, pre16) = (
+        PreintegratedTable::build(&tf(255.0), p.step, 256).unwrap(),
+        PreintegratedTable::build(&tf(65535.0), p.step, 256).unwrap(),
+    );
+    let pm8 = PreintegratedMedium::new(*m8.volume(), pre8.view());
+    let pm16 = PreintegratedMedium::new(*m16.volume(), pre16.view());
+    let pm32 = PreintegratedMedium::new(*m32.volume(), pre8.view());
 
     // Rows of (name, contenders); the first contender of a row is its reference.
     let (s8, x8) = pair(&m8, &p);
@@ -72,10 +89,16 @@ fn speed() {
     let (s32, x32) = pair(&m32, &p);
     let (s_plain, x_plain) = pair(&plain, &p);
     let (s_skip, x_skip) = pair(&skip, &p);
+    let (ps8, px8) = pre_pair(&pm8, &p);
+    let (ps16, px16) = pre_pair(&pm16, &p);
+    let (ps32, px32) = pre_pair(&pm32, &p);
     let rows: Vec<(&str, Vec<(&str, Run)>)> = vec![
         ("dense u8", vec![("scalar", s8), ("x8", x8)]),
         ("dense u16", vec![("scalar", s16), ("x8", x16)]),
         ("dense f32", vec![("scalar", s32), ("x8", x32)]),
+        ("dense u8, pre-integrated", vec![("scalar", ps8), ("x8", px8)]),
+        ("dense u16, pre-integrated", vec![("scalar", ps16), ("x8", px16)]),
+        ("dense f32, pre-integrated", vec![("scalar", ps32), ("x8", px32)]),
         (
             "sparse torus u8",
             vec![
@@ -123,7 +146,7 @@ fn speed() {
             println!("| {name} | {what} | {b:.2} | {:.2}x |", best[0] / b);
         }
     }
-    let t = &best[3];
+    let t = &best[6];
     println!(
         "empty-space skipping on the sparse torus: scalar {:.2}x, x8 {:.2}x faster with the grid",
         t[0] / t[2],
