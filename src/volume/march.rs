@@ -707,8 +707,8 @@ pub fn integrate_x8<M: Medium>(
         let jumping_now = jumping & active;
         let sampling = active & !jumping_now;
         // Every lane with a ray is live here (finished ones were refilled at once), so k steps
-        // without waiting for this round's opacity; the jumping lanes then move to their jump's
-        // end.
+        // without waiting for this round's opacity (idle lanes, n = 0, step too, harmlessly: k
+        // < n stays false); the jumping lanes then move to their jump's end.
         let k0 = v.k;
         v.k += one;
         let mut bits = jumping_now;
@@ -723,15 +723,15 @@ pub fn integrate_x8<M: Medium>(
         }
         // The next round's lookups, made before this round's compositing: every lane with steps
         // left, whatever its opacity becomes (a lane that reaches the threshold now is refilled
-        // below, and the next round looked up again).
+        // below and, if it takes a new ray, looked up again).
         // PERF: a round is one long chain of dependent latencies (position, cell, gathers,
         // interpolation, table rows, exp, compositing) and wider than the processor's window
         // allows to overlap; issuing the next round's gathers before this round's exp and
         // compositing lets them run beside it. Dense Marschner-Lobb 128^3, best of 5 x 3 rounds
         // taking turns (Intel Xeon, 2026-12-04): f32 16.4 -> 15.1 ms, u16 15.0 -> 14.1 ms,
-        // u8 14.7 -> 13.8 ms; the sparse torus with a grid alike (3.86 -> 3.90 ms). A lane that
-        // takes a new ray is looked up again alone (redoing all eight: torus 5.5 against 4.8 ms,
-        // one criterion run each).
+        // u8 14.7 -> 13.8 ms; the sparse torus with a grid alike (3.86 -> 3.90 ms). Only the
+        // lanes that take new rays are looked up again, in one call (redoing all eight: torus
+        // 5.5 against 4.8 ms, one criterion run each).
         prefetch_now = !prefetch_now;
         let (g1, h1) = place(&v, prefetch_now);
         let (smp1, jumping1) = m.lookup_x8_partial(&g1, v.k.lt(v.n).bitmask(), &mut regions);

@@ -107,7 +107,7 @@ pub trait Medium {
 
     /// A hint: asks the cache for what [`lookup_x8`](Self::lookup_x8) at `g` will read, a few
     /// steps before it does. Changes no result; the default does nothing. [`integrate_x8`](super::integrate_x8)
-    /// calls it every second step for the positions six steps ahead; a medium over memory the
+    /// calls it about every second step for the positions six steps ahead; a medium over memory the
     /// caches do not hold (a large volume) implements it, as [`VolumeMedium`] does.
     #[inline(always)]
     fn prefetch_x8(&self, g: &[f32x8; 3]) {
@@ -132,7 +132,8 @@ pub trait Medium {
     /// [`integrate_x8`](super::integrate_x8) calls this every step: the lanes in empty regions
     /// jump while the others composite. It asks for a step's lookups before compositing the step
     /// before, so a lane whose ray reaches the opacity threshold may be looked up once more past
-    /// its last step (that answer is not used). The default asks [`lookup_x8`](Self::lookup_x8) again
+    /// its last step (that answer, and any region written for it, is not used); in a step where
+    /// lanes take new rays, it asks a second time for those lanes alone. The default asks [`lookup_x8`](Self::lookup_x8) again
     /// for the lanes it did not find empty (and, should that still report empty lanes, looks
     /// those up one by one). A medium may override it to find both in one pass.
     ///
