@@ -1122,3 +1122,249 @@ fn preintegrated_bad_input() {
     );
     assert!(out.iter().all(|p| p.bit_eq(&Rgba::ZERO)) && st.samples > 0);
 }
+
+// ---- Media that stretch the `lookup_x8_partial` contract (written in review of the pipelined
+// x8 marchers, 2026-12-04).
+
+/// Looks every lane up one at a time, like the wrapped medium, but puts NaN in the sample lanes it
+/// does not sample, writes a junk region (a box of 1e9) into every lane it does not report empty,
+/// and reports every lane it was not asked about as empty: the marchers may use only what the
+/// contract promises (the samples of the asked lanes it did not report, the regions of the lanes
+/// it did).
+struct Garbage<'a, M: Medium>(&'a M);
+impl<M: Medium> Medium for Garbage<'_, M> {
+    fn bounds(&self) -> Aabb {
+        self.0.bounds()
+    }
+    fn local_frame(&self) -> (Vec3, Vec3) {
+        self.0.local_frame()
+    }
+    fn lookup(&self, g: Vec3) -> Lookup {
+        self.0.lookup(g)
+    }
+    fn prefetch_x8(&self, g: &[strahl::math::f32x8; 3]) {
+        self.0.prefetch_x8(g)
+    }
+    fn lookup_x8_partial(
+        &self,
+        g: &[strahl::math::f32x8; 3],
+        active: u32,
+        empty: &mut [EmptyRegion; 8],
+    ) -> (SampleX8, u32) {
+        let (x, y, z) = (g[0].to_array(), g[1].to_array(), g[2].to_array());
+        let junk = EmptyRegion {
+            exit: Aabb::new(Vec3::splat(-1e9), Vec3::splat(1e9)),
+            safe: Aabb::new(Vec3::splat(-1e9), Vec3::splat(1e9)),
+        };
+        let (mut tau, mut col, mut skip) = ([f32::NAN; 8], [[f32::NAN; 8]; 3], 0u32);
+        for l in 0..8 {
+            if active >> l & 1 == 0 {
+                empty[l] = junk;
+                skip |= 1 << l;
+                continue;
+            }
+            match self.0.lookup(Vec3::new(x[l], y[l], z[l])) {
+                Lookup::Sample(s) => {
+                    tau[l] = s.tau;
+                    for (c, sc) in col.iter_mut().zip(s.color) {
+                        c[l] = sc;
+                    }
+                    empty[l] = junk;
+                }
+                Lookup::Empty(r) => {
+                    empty[l] = r;
+                    skip |= 1 << l;
+                }
+            }
+        }
+        (
+            SampleX8 {
+                tau: strahl::math::f32x8::new(tau),
+                color: col.map(strahl::math::f32x8::new),
+            },
+            skip,
+        )
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+    /// Random volumes, tables, rays and parameters: the x8 marchers through `Garbage` and
+    /// `Stingy` equal the plain medium's, bit for bit, counters too; the pre-integrated x8
+    /// marcher equals its scalar reference with and without a grid.
+    #[test]
+    fn junk_in_unused_lanes_changes_nothing((data, dims, table, rays, p, block) in arb_case()) {
+        let vol = Volume::new(&data, dims, Vec3::new(0.5, 0.25, 0.75), Vec3::new(0.1, -0.2, 0.3)).unwrap();
+        let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+        let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+        grid.classify(&tf);
+        let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+        let (a, sa) = both(&skipping, &rays, &p);
+        let (b, sb) = both(&Garbage(&skipping), &rays, &p);
+        let (c, sc) = both(&Stingy(&skipping), &rays, &p);
+        prop_assert_eq!(sa, sb);
+        prop_assert_eq!(sa, sc);
+        for ((x, y), z) in a.iter().zip(&b).zip(&c) {
+            prop_assert!(x.bit_eq(y) && x.bit_eq(z));
+        }
+        let pre = PreintegratedTable::build(&tf, p.step, 16).unwrap();
+        grid.classify_preintegrated(&pre);
+        for m in [
+            PreintegratedMedium::new(vol, pre.view()),
+            PreintegratedMedium::new(vol, pre.view()).with_grid(&grid).unwrap(),
+        ] {
+            let mut o1 = vec![Rgba::ZERO; rays.len()];
+            let mut o2 = vec![Rgba { r: 9.0, ..Rgba::ZERO }; rays.len()];
+            let s1 = integrate_preintegrated_scalar(&m, &rays, &mut o1, &p).unwrap();
+            let s2 = integrate_preintegrated_x8(&m, &rays, &mut o2, &p).unwrap();
+            prop_assert_eq!(s1, s2);
+            for (x, y) in o1.iter().zip(&o2) {
+                prop_assert!(x.bit_eq(y), "{:?} {:?}", x, y);
+            }
+        }
+    }
+}
+
+/// Batches of 0 to 300 rays (NaN and zero-direction ones among them) at every block size, step,
+/// sampling, termination and step cap: every adversarial medium gives the plain medium's images
+/// and counters, and the pre-integrated x8 marcher its scalar reference's.
+#[test]
+fn every_setting_through_adversarial_media() {
+    let n = 40;
+    let data = ball(n, 0.3);
+    let vol = unit_volume(&data, n);
+    let table = ball_tf();
+    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    let mut total = MarchStats::default();
+    for count in [0usize, 1, 3, 7, 8, 9, 17, 300] {
+        let mut rays = test_rays(count);
+        if count > 5 {
+            rays[2] = Ray::new(Vec3::splat(f32::NAN), Vec3::Z);
+            rays[4] = Ray::new(Vec3::splat(0.5), Vec3::ZERO);
+        }
+        for block in [2, 4, 8] {
+            let mut grid = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+            grid.classify(&tf);
+            let skipping = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+            for step in [0.007f32, 0.013, 0.05, 0.3] {
+                for s in [Sampling::Midpoint, Sampling::Endpoint] {
+                    for term in [None, Some(0.0), Some(0.01), Some(0.5), Some(0.95)] {
+                        for ms in [DEFAULT_MAX_STEPS, 7] {
+                            let p = MarchParams {
+                                step,
+                                sampling: s,
+                                termination: term,
+                                max_steps: ms,
+                            };
+                            let (a, sa) = both(&skipping, &rays, &p);
+                            let (b, sb) = both(&Garbage(&skipping), &rays, &p);
+                            let (c, sc) = both(&Stingy(&skipping), &rays, &p);
+                            let (d, sd) = both(&ScalarOnly(&skipping), &rays, &p);
+                            assert_eq!(sa, sb);
+                            assert_eq!(sa, sc);
+                            assert_eq!(sa, sd);
+                            for i in 0..a.len() {
+                                assert!(a[i].bit_eq(&b[i]) && a[i].bit_eq(&c[i]) && a[i].bit_eq(&d[i]));
+                            }
+                            total.skipped += sa.skipped;
+                            total.terminated += sa.terminated;
+                            total.samples += sa.samples;
+                            let pre = PreintegratedTable::build(&tf, step, 32).unwrap();
+                            let mut g2 = MacrocellGrid::build(&vol, GridParams { block }).unwrap();
+                            g2.classify_preintegrated(&pre);
+                            for m in [
+                                PreintegratedMedium::new(vol, pre.view()),
+                                PreintegratedMedium::new(vol, pre.view()).with_grid(&g2).unwrap(),
+                            ] {
+                                let mut o1 = vec![Rgba::ZERO; rays.len()];
+                                let mut o2 = vec![Rgba { r: 9.0, ..Rgba::ZERO }; rays.len()];
+                                let s1 = integrate_preintegrated_scalar(&m, &rays, &mut o1, &p).unwrap();
+                                let s2 = integrate_preintegrated_x8(&m, &rays, &mut o2, &p).unwrap();
+                                assert_eq!(s1, s2, "{p:?}");
+                                for (x, y) in o1.iter().zip(&o2) {
+                                    assert!(x.bit_eq(y));
+                                }
+                                total.skipped += s1.skipped;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(
+        total.skipped > 0 && total.terminated > 0 && total.samples > 0,
+        "{total:?}"
+    );
+}
+
+/// A procedural medium: empty stripes whose exit boxes are sometimes wider than their safe boxes
+/// (so jumps get refused), and, with `nan`, NaN extinction in a corner.
+struct Stripes {
+    nan: bool,
+}
+impl Medium for Stripes {
+    fn bounds(&self) -> Aabb {
+        Aabb::new(Vec3::ZERO, Vec3::ONE)
+    }
+    fn lookup(&self, g: Vec3) -> Lookup {
+        let c = (g.x * 7.0).floor();
+        if (c as i32) % 2 == 0 && g.y < 0.8 {
+            let lo = Vec3::new(c / 7.0, 0.0, 0.0);
+            let hi = Vec3::new((c + 1.0) / 7.0, 0.8, 1.0);
+            // exit sometimes wider than safe -> refused jumps
+            let exit = if g.z > 0.5 {
+                Aabb::new(lo, hi + Vec3::X * 0.05)
+            } else {
+                Aabb::new(lo, hi)
+            };
+            Lookup::Empty(EmptyRegion {
+                exit,
+                safe: Aabb::new(lo, hi),
+            })
+        } else {
+            let tau = if self.nan && g.z > 0.93 && g.x < 0.3 {
+                f32::NAN
+            } else {
+                3.0 * g.z + g.y * 40.0 * (g.x - 0.5).abs()
+            };
+            Lookup::Sample(Sample {
+                tau,
+                color: [g.x, g.y, g.z],
+            })
+        }
+    }
+}
+
+/// `Stripes` marched directly, through `Garbage` and through `Stingy`: the same images and
+/// counters.
+#[test]
+fn refused_jumps_and_nan_extinction_through_adversarial_media() {
+    for count in [1usize, 5, 8, 13, 200] {
+        let rays = test_rays(count);
+        for nan in [false, true] {
+            let m = Stripes { nan };
+            for step in [0.004f32, 0.011, 0.07] {
+                for s in [Sampling::Midpoint, Sampling::Endpoint] {
+                    for term in [None, Some(0.0), Some(0.02), Some(0.7)] {
+                        let p = MarchParams {
+                            step,
+                            sampling: s,
+                            termination: term,
+                            max_steps: DEFAULT_MAX_STEPS,
+                        };
+                        let (a, sa) = both(&m, &rays, &p);
+                        let (b, sb) = both(&Garbage(&m), &rays, &p);
+                        let (c, sc) = both(&Stingy(&m), &rays, &p);
+                        assert_eq!(sa, sb);
+                        assert_eq!(sa, sc);
+                        assert!(sa.skipped > 0 || count < 8);
+                        for i in 0..a.len() {
+                            assert!(a[i].bit_eq(&b[i]) && a[i].bit_eq(&c[i]));
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
