@@ -210,6 +210,12 @@ fn run_bvh8_occluded(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter().filter(|r| c.bvh8.occluded::<Moller>(r)).count()
 }
 
+fn run_bvh8_occluded_batch(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut out = vec![false; rays.len()];
+    c.bvh8.occluded_batch::<Moller>(rays, &mut out);
+    out.iter().filter(|&&o| o).count()
+}
+
 fn run_bvh_crate_occluded(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter()
         .filter(|r| {
@@ -265,6 +271,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh2_scalar", run_bvh2_occluded),
                 ("bvh4", run_bvh4_occluded),
                 ("bvh8", run_bvh8_occluded),
+                ("bvh8_batch", run_bvh8_occluded_batch),
                 ("packet8_bvh8", run_packet8_occluded),
                 ("bvh_crate", run_bvh_crate_occluded),
                 ("obvhs", run_obvhs_occluded),

@@ -46,6 +46,19 @@ fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
             assert_eq!(b4.occluded::<T>(ray), any, "{what}: bvh4 occluded {ray:?}");
             assert_eq!(b8.occluded::<T>(ray), any, "{what}: bvh8 occluded {ray:?}");
         }
+        // The batch (two walks interleaved, each refilled as it ends), at every short length and
+        // the whole set, with an output shorter than the rays (the rest untouched).
+        let want: Vec<bool> = rays.iter().map(|r| occluded_brute_force::<T, _>(tris, r)).collect();
+        for len in [0, 1, 2, 3, 4, 5, rays.len()] {
+            let len = len.min(rays.len());
+            let mut o4 = vec![false; len];
+            let mut o8 = vec![true; len + 1];
+            b4.occluded_batch::<T>(&rays[..len], &mut o4);
+            b8.occluded_batch::<T>(&rays, &mut o8[..len]);
+            assert_eq!(o4, want[..len], "{name} / {pname}: bvh4 occluded_batch of {len}");
+            assert_eq!(o8[..len], want[..len], "{name} / {pname}: bvh8 occluded_batch of {len}");
+            assert!(o8[len], "{name} / {pname}: occluded_batch wrote past its output");
+        }
     }
 }
 

@@ -165,6 +165,12 @@ pub fn check_bvh(case: &BvhCase) {
         packet::intersect8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_pure, 0);
         let mut packet_occ = [false; 8];
         packet::occluded8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_occ);
+        // The interleaved batch answers exactly as one call per ray, on every scene (tame or not).
+        let mut batch_occ = vec![false; case.rays.len()];
+        b8.occluded_batch::<Watertight>(&case.rays, &mut batch_occ);
+        for (ray, got) in case.rays.iter().zip(&batch_occ) {
+            assert_eq!(*got, b8.occluded::<Watertight>(ray), "{:?}: occluded_batch {ray:?}", params.strategy);
+        }
         // NOTE: the triangle kernels are exact enough for brute-force equality only while no
         // coordinate is huge or tiny: near `f32::MAX` the watertight shear loses every digit, and
         // near the subnormals its edge functions underflow to zero (counted as on the edge), so
