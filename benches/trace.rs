@@ -210,9 +210,15 @@ fn run_bvh8_occluded(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter().filter(|r| c.bvh8.occluded::<Moller>(r)).count()
 }
 
-fn run_bvh8_occluded_batch(c: &Contenders, rays: &[Ray]) -> usize {
+fn run_bvh8_incoherent(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut hits = vec![None; rays.len()];
+    c.bvh8.intersect_batch_incoherent::<Moller>(rays, &mut hits);
+    hits.iter().filter(|h| h.is_some()).count()
+}
+
+fn run_bvh8_occluded_incoherent(c: &Contenders, rays: &[Ray]) -> usize {
     let mut out = vec![false; rays.len()];
-    c.bvh8.occluded_batch::<Moller>(rays, &mut out);
+    c.bvh8.occluded_batch_incoherent::<Moller>(rays, &mut out);
     out.iter().filter(|&&o| o).count()
 }
 
@@ -271,7 +277,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh2_scalar", run_bvh2_occluded),
                 ("bvh4", run_bvh4_occluded),
                 ("bvh8", run_bvh8_occluded),
-                ("bvh8_batch", run_bvh8_occluded_batch),
+                ("bvh8_incoherent", run_bvh8_occluded_incoherent),
                 ("packet8_bvh8", run_packet8_occluded),
                 ("bvh_crate", run_bvh_crate_occluded),
                 ("obvhs", run_obvhs_occluded),
@@ -281,6 +287,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh2_scalar", run_bvh2),
                 ("bvh4", run_bvh4),
                 ("bvh8", run_bvh8),
+                ("bvh8_incoherent", run_bvh8_incoherent),
                 ("packet8_bvh8", run_packet8),
                 ("hybrid8_bvh8", run_hybrid8),
                 ("bvh_crate", run_bvh_crate),

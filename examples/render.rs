@@ -146,7 +146,7 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
         Assignment::Dynamic,
         |t: Tile, out: &mut [[u8; 3]]| {
             let tw = t.x1 - t.x0;
-            // One pixel's AO rays go to `occluded_batch` together (two walks interleaved).
+            // One pixel's AO rays go to `occluded_batch_incoherent` together (two walks interleaved).
             let (mut ao_rays, mut occ) = (Vec::with_capacity(o.ao as usize), vec![false; o.ao as usize]);
             for (i, px) in out.iter_mut().enumerate() {
                 let (x, y) = (t.x0 + i as u32 % tw, t.y0 + i as u32 / tw);
@@ -168,7 +168,7 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
                 let mut rng = Rng::new((y as u64) << 32 | x as u64);
                 ao_rays.clear();
                 ao_rays.extend((0..o.ao).map(|_| Ray::with_range(p, cosine_dir(n, &mut rng), 0.0, scale * 0.1)));
-                bvh.occluded_batch::<Watertight>(&ao_rays, &mut occ);
+                bvh.occluded_batch_incoherent::<Watertight>(&ao_rays, &mut occ);
                 let open = occ.iter().filter(|&&blocked| !blocked).count();
                 let ao = if o.ao == 0 { 1.0 } else { open as f32 / o.ao as f32 };
                 let base = n * 0.5 + Vec3::splat(0.5);

@@ -46,18 +46,32 @@ fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
             assert_eq!(b4.occluded::<T>(ray), any, "{what}: bvh4 occluded {ray:?}");
             assert_eq!(b8.occluded::<T>(ray), any, "{what}: bvh8 occluded {ray:?}");
         }
-        // The batch (two walks interleaved, each refilled as it ends), at every short length and
-        // the whole set, with an output shorter than the rays (the rest untouched).
+        // The incoherent batches (two walks interleaved, each refilled as it ends), at every
+        // short length and the whole set, with an output shorter than the rays (the rest
+        // untouched): the single-ray answers (checked against brute force above), bit for bit.
         let want: Vec<bool> = rays.iter().map(|r| occluded_brute_force::<T, _>(tris, r)).collect();
+        let want_hits: Vec<_> = rays.iter().map(|r| b8.intersect::<T>(r)).collect();
+        let want_hits4: Vec<_> = rays.iter().map(|r| b4.intersect::<T>(r)).collect();
         for len in [0, 1, 2, 3, 4, 5, rays.len()] {
             let len = len.min(rays.len());
+            let what = format!("{name} / {pname} / {}: batch of {len}", T::NAME);
             let mut o4 = vec![false; len];
             let mut o8 = vec![true; len + 1];
-            b4.occluded_batch::<T>(&rays[..len], &mut o4);
-            b8.occluded_batch::<T>(&rays, &mut o8[..len]);
-            assert_eq!(o4, want[..len], "{name} / {pname}: bvh4 occluded_batch of {len}");
-            assert_eq!(o8[..len], want[..len], "{name} / {pname}: bvh8 occluded_batch of {len}");
-            assert!(o8[len], "{name} / {pname}: occluded_batch wrote past its output");
+            b4.occluded_batch_incoherent::<T>(&rays[..len], &mut o4);
+            b8.occluded_batch_incoherent::<T>(&rays, &mut o8[..len]);
+            assert_eq!(o4, want[..len], "{what}: bvh4 occluded");
+            assert_eq!(o8[..len], want[..len], "{what}: bvh8 occluded");
+            assert!(o8[len], "{what}: occluded wrote past its output");
+            let mut h4 = vec![None; len];
+            let sentinel = b8
+                .intersect::<T>(&rays[0])
+                .or(want_hits.iter().flatten().next().copied());
+            let mut h8 = vec![sentinel; len + 1];
+            b4.intersect_batch_incoherent::<T>(&rays[..len], &mut h4);
+            b8.intersect_batch_incoherent::<T>(&rays, &mut h8[..len]);
+            assert_eq!(h4, want_hits4[..len], "{what}: bvh4 intersect");
+            assert_eq!(h8[..len], want_hits[..len], "{what}: bvh8 intersect");
+            assert_eq!(h8[len], sentinel, "{what}: intersect wrote past its output");
         }
     }
 }

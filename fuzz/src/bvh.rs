@@ -167,9 +167,24 @@ pub fn check_bvh(case: &BvhCase) {
         packet::occluded8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_occ);
         // The interleaved batch answers exactly as one call per ray, on every scene (tame or not).
         let mut batch_occ = vec![false; case.rays.len()];
-        b8.occluded_batch::<Watertight>(&case.rays, &mut batch_occ);
+        b8.occluded_batch_incoherent::<Watertight>(&case.rays, &mut batch_occ);
         for (ray, got) in case.rays.iter().zip(&batch_occ) {
-            assert_eq!(*got, b8.occluded::<Watertight>(ray), "{:?}: occluded_batch {ray:?}", params.strategy);
+            assert_eq!(
+                *got,
+                b8.occluded::<Watertight>(ray),
+                "{:?}: occluded_batch_incoherent {ray:?}",
+                params.strategy
+            );
+        }
+        let mut batch_hits = vec![None; case.rays.len()];
+        b8.intersect_batch_incoherent::<Watertight>(&case.rays, &mut batch_hits);
+        for (ray, got) in case.rays.iter().zip(&batch_hits) {
+            assert_eq!(
+                *got,
+                b8.intersect::<Watertight>(ray),
+                "{:?}: intersect_batch_incoherent {ray:?}",
+                params.strategy
+            );
         }
         // NOTE: the triangle kernels are exact enough for brute-force equality only while no
         // coordinate is huge or tiny: near `f32::MAX` the watertight shear loses every digit, and
