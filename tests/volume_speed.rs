@@ -10,25 +10,16 @@
 //! turns gives steadier ratios than criterion's one contender after the other. Every contender's
 //! image is checked against the scalar reference's first.
 
+#[path = "../benches/common/mod.rs"]
+mod common;
+
+use common::ramp;
 use std::time::Instant;
 use strahl::volume::procedural::{marschner_lobb, pinhole_rays, torus, unit_volume};
 use strahl::volume::*;
 use strahl::{Ray, Vec3};
 
 const N: u32 = 128;
-
-/// As `benches/common`: entries `lo..=hi` a colour ramp with extinction `gain (0.2 + t)`.
-fn ramp(lo: usize, hi: usize, gain: f32) -> Vec<TfEntry> {
-    (0..256)
-        .map(|i| {
-            if i < lo || i > hi {
-                return TfEntry::TRANSPARENT;
-            }
-            let t = (i - lo) as f32 / (hi - lo).max(1) as f32;
-            TfEntry::new([0.9 * t + 0.1, 0.4 + 0.3 * t, 1.0 - 0.8 * t], gain * (0.2 + t))
-        })
-        .collect()
-}
 
 type Run<'a> = Box<dyn Fn(&[Ray], &mut [Rgba]) -> MarchStats + 'a>;
 
