@@ -212,3 +212,63 @@ fn packets_equal_single_rays() {
         }
     }
 }
+
+/// Views that break the tree's invariants (a child pointing back at the root, codes out of range,
+/// a leaf code past the packs): the single-ray functions and the incoherent batches never panic
+/// or hang, and the batches answer exactly as one call per ray (the same walk, bit for bit). With
+/// a real child replaced by the root (a cycle that also cuts the child's subtree off), the answers
+/// are still exact: a ray that enters the child's box goes round the cycle until its walk exceeds
+/// its budget, then scans every pack, keeping the hit it had.
+#[test]
+fn malformed_views_batches_equal_single_rays() {
+    use strahl::layout::{Bvh8Ref, BvhWideRef, EMPTY_CHILD, LEAF_BIT, Node8};
+    use strahl::traverse::wide;
+    let tris = scene::bunny().to_soup();
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    let rays = rays(&tris, 400, 5);
+    let n = b8.nodes().len();
+    // The first slot holding a real child.
+    let used = |node: &Node8| node.child.iter().position(|&c| c != EMPTY_CHILD).unwrap_or(0);
+    type Edit = fn(&mut [Node8], usize, usize);
+    let edits: [(&str, Edit); 4] = [
+        ("cycle", |nodes, i, slot| nodes[i].child[slot] = 0),
+        ("node out of range", |nodes, i, slot| nodes[i].child[slot] = 1 << 30),
+        ("leaf past the packs", |nodes, i, slot| {
+            nodes[i].child[slot] = LEAF_BIT | (1 << 26) << 4
+        }),
+        ("root into itself", |nodes, _, _| nodes[0].child[0] = 0),
+    ];
+    let mut cycles_checked = 0;
+    for (what, edit) in edits {
+        for at in [0, 1.min(n - 1), n / 2, n - 1] {
+            let mut nodes = b8.nodes().to_vec();
+            let slot = used(&nodes[at]);
+            edit(&mut nodes, at, slot);
+            let view: Bvh8Ref = BvhWideRef {
+                nodes: &nodes,
+                packs: b8.packs(),
+            };
+            let (mut hits, mut occ) = (vec![None; rays.len()], vec![false; rays.len()]);
+            wide::intersect_batch_incoherent::<Watertight, _, 8>(view, &rays, &mut hits);
+            wide::occluded_batch_incoherent::<Watertight, _, 8>(view, &rays, &mut occ);
+            for (i, r) in rays.iter().enumerate() {
+                let single = wide::intersect::<Watertight, _, 8>(view, r);
+                let any = wide::occluded::<Watertight, _, 8>(view, r);
+                assert_eq!(hits[i], single, "{what} at {at}: intersect {r:?}");
+                assert_eq!(occ[i], any, "{what} at {at}: occluded {r:?}");
+                if what == "cycle" {
+                    let want = intersect_brute_force::<Watertight, _>(&tris[..], r);
+                    same(single, want, &tris, r, &format!("{what} at {at}: vs brute force"));
+                    assert_eq!(
+                        any,
+                        occluded_brute_force::<Watertight, _>(&tris[..], r),
+                        "{what} at {at}"
+                    );
+                    cycles_checked += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(cycles_checked, 4 * rays.len());
+}
