@@ -223,48 +223,20 @@ pub fn intersect_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
     rays: &[Ray],
     hits: &mut [Option<Hit>],
 ) {
-    let n = rays.len().min(hits.len());
-    if n < 2 || bvh.nodes.is_empty() {
-        for (r, h) in rays.iter().zip(hits.iter_mut()) {
-            *h = intersect::<T, L, N>(bvh, r);
-        }
-        return;
-    }
-    // An empty ray's walk starts done, with no hit.
     let start = |i: usize| {
         let r = PreparedRay::new_for(&rays[i], T::WATERTIGHT);
         let mut w = ClosestWalk::<STACK>::new(bvh, 0);
-        w.done = r.is_empty();
+        // An empty ray's walk starts done, with no hit (as `intersect`).
+        w.done = r.is_empty() || bvh.nodes.is_empty();
         (r, w)
     };
-    let (mut ia, mut ib, mut next) = (0, 1, 2);
-    let ((mut ra, mut wa), (mut rb, mut wb)) = (start(0), start(1));
-    loop {
-        if !wa.done {
-            wa.step::<T, L, N>(bvh, &mut ra);
-        }
-        if !wb.done {
-            wb.step::<T, L, N>(bvh, &mut rb);
-        }
-        if wa.done {
-            hits[ia] = wa.best;
-            if next == n {
-                hits[ib] = wb.finish::<T, L, N>(bvh, &mut rb);
-                return;
-            }
-            (ia, next) = (next, next + 1);
-            (ra, wa) = start(ia);
-        }
-        if wb.done {
-            hits[ib] = wb.best;
-            if next == n {
-                hits[ia] = wa.finish::<T, L, N>(bvh, &mut ra);
-                return;
-            }
-            (ib, next) = (next, next + 1);
-            (rb, wb) = start(ib);
-        }
-    }
+    interleave2(
+        hits,
+        rays.len(),
+        start,
+        |(r, w)| w.step::<T, L, N>(bvh, r),
+        |(_, w)| w.done.then_some(w.best),
+    );
 }
 
 /// `true` if `ray` hits any triangle of the wide BVH `bvh` within `[tmin, tmax)`; stops at the
@@ -403,44 +375,71 @@ pub fn occluded_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
     rays: &[Ray],
     out: &mut [bool],
 ) {
-    let n = rays.len().min(out.len());
+    let start = |i: usize| {
+        let r = PreparedRay::new_for(&rays[i], T::WATERTIGHT);
+        let w = AnyHitWalk::<STACK>::new(bvh, &r);
+        (r, w)
+    };
+    interleave2(
+        out,
+        rays.len(),
+        start,
+        |(r, w)| w.step::<T, L, N>(bvh, r),
+        |(_, w)| w.done,
+    );
+}
+
+/// Runs the walks of items `0..n` (`n` = the shorter of `len` and `out`) two at a time,
+/// interleaved: each turn steps both unfinished walks once; a finished walk's answer goes to
+/// `out[i]` and its slot starts the next item. `start(i)` makes item `i`'s walk, `step` advances
+/// it, `answer` is `Some` once it has ended.
+#[inline(always)]
+fn interleave2<S, O>(
+    out: &mut [O],
+    len: usize,
+    start: impl Fn(usize) -> S,
+    step: impl Fn(&mut S),
+    answer: impl Fn(&S) -> Option<O>,
+) {
+    let n = len.min(out.len());
+    let finish = |w: &mut S| loop {
+        match answer(w) {
+            Some(x) => return x,
+            None => step(w),
+        }
+    };
     if n < 2 {
         if n == 1 {
-            out[0] = occluded::<T, L, N>(bvh, &rays[0]);
+            out[0] = finish(&mut start(0));
         }
         return;
     }
-    let prepare = |i: usize| PreparedRay::new_for(&rays[i], T::WATERTIGHT);
     let (mut ia, mut ib, mut next) = (0, 1, 2);
-    let (mut ra, mut rb) = (prepare(0), prepare(1));
-    let mut wa = AnyHitWalk::<STACK>::new(bvh, &ra);
-    let mut wb = AnyHitWalk::<STACK>::new(bvh, &rb);
+    let (mut a, mut b) = (start(0), start(1));
     loop {
-        if wa.done.is_none() {
-            wa.step::<T, L, N>(bvh, &ra);
+        if answer(&a).is_none() {
+            step(&mut a);
         }
-        if wb.done.is_none() {
-            wb.step::<T, L, N>(bvh, &rb);
+        if answer(&b).is_none() {
+            step(&mut b);
         }
-        if let Some(hit) = wa.done {
-            out[ia] = hit;
+        if let Some(x) = answer(&a) {
+            out[ia] = x;
             if next == n {
-                out[ib] = wb.finish::<T, L, N>(bvh, &rb);
+                out[ib] = finish(&mut b);
                 return;
             }
             (ia, next) = (next, next + 1);
-            ra = prepare(ia);
-            wa = AnyHitWalk::new(bvh, &ra);
+            a = start(ia);
         }
-        if let Some(hit) = wb.done {
-            out[ib] = hit;
+        if let Some(x) = answer(&b) {
+            out[ib] = x;
             if next == n {
-                out[ia] = wa.finish::<T, L, N>(bvh, &ra);
+                out[ia] = finish(&mut a);
                 return;
             }
             (ib, next) = (next, next + 1);
-            rb = prepare(ib);
-            wb = AnyHitWalk::new(bvh, &rb);
+            b = start(ib);
         }
     }
 }

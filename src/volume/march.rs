@@ -529,6 +529,18 @@ struct LaneVecs {
     acc: f32x8,
 }
 
+impl LaneVecs {
+    /// Each lane's local position at distance `s` along its ray.
+    #[inline(always)]
+    fn at(&self, s: f32x8) -> [f32x8; 3] {
+        [
+            self.ge[0] + self.gd[0] * s,
+            self.ge[1] + self.gd[1] * s,
+            self.ge[2] + self.gd[2] * s,
+        ]
+    }
+}
+
 /// Lane state of the 8-wide marcher.
 struct Lanes {
     ray: [usize; 8],
@@ -684,10 +696,9 @@ pub fn integrate_x8<M: Medium>(
         let s0 = v.k * dt;
         let h = dt.min_l(v.len - s0).max_l(zero);
         let s = if ctx.mid { s0 + half * h } else { s0 };
-        let g = [v.ge[0] + v.gd[0] * s, v.ge[1] + v.gd[1] * s, v.ge[2] + v.gd[2] * s];
+        let g = v.at(s);
         if prefetch {
-            let sp = s + ahead;
-            m.prefetch_x8(&[v.ge[0] + v.gd[0] * sp, v.ge[1] + v.gd[1] * sp, v.ge[2] + v.gd[2] * sp]);
+            m.prefetch_x8(&v.at(s + ahead));
         }
         (g, h)
     };
@@ -943,11 +954,9 @@ pub fn integrate_preintegrated_x8<V: Voxel>(
         let s0 = v.k * dt;
         let h = dt.min_l(v.len - s0).max_l(zero);
         let s = s0 + h;
-        let g = [v.ge[0] + v.gd[0] * s, v.ge[1] + v.gd[1] * s, v.ge[2] + v.gd[2] * s];
+        let g = v.at(s);
         if prefetch {
-            let sp = s + ahead;
-            m.volume()
-                .prefetch_x8([v.ge[0] + v.gd[0] * sp, v.ge[1] + v.gd[1] * sp, v.ge[2] + v.gd[2] * sp]);
+            m.volume().prefetch_x8(v.at(s + ahead));
         }
         (g, h, m.volume().sample_local_x8(g))
     };
