@@ -4,12 +4,15 @@
 //! warm its [`Builder`], then `STRAHL_REPS` timed builds (default 5), best and median. `STRAHL_N`
 //! sets the soup size (`scene::thin_soup(n, 1)`, default 2^20); `STRAHL_ONLY` a comma-separated
 //! list of builders (`fastest`, `lbvh63`, `fast`, `binned8all`, `balanced`, `median`, `quality`,
-//! `hlbvh`, `hybrid_sah`). `STRAHL_THREADS=t` (t > 1) also times `Builder::build_into_par` on `t`
+//! `hlbvh`, `hybrid_sah`; `*_normalized`: the Morton builders on the classic per-axis grid,
+//! [`MortonCells::Normalized`]). `STRAHL_SCENE` picks the scene: `soup` (default), `terrain`
+//! (`scene::terrain(724, 1)`, 1M triangles, 5:1 flat), `sphereflake` (`scene::sphereflake(3, 3)`)
+//! or `bunny`. `STRAHL_THREADS=t` (t > 1) also times `Builder::build_into_par` on `t`
 //! threads right after each builder's single-threaded builds (taking turns with them), with its
 //! speed-up; "CPU" is then the calling thread's only.
 
 use std::time::Instant;
-use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, Strategy};
+use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Strategy};
 use strahl::scene;
 
 #[test]
@@ -20,7 +23,18 @@ fn speed() {
     let reps: usize = env("STRAHL_REPS").and_then(|s| s.parse().ok()).unwrap_or(5).max(1);
     let only = env("STRAHL_ONLY");
     let threads: usize = env("STRAHL_THREADS").and_then(|s| s.parse().ok()).unwrap_or(1);
-    let soup = scene::thin_soup(n, 1);
+    let soup = match env("STRAHL_SCENE").as_deref() {
+        None | Some("soup") => scene::thin_soup(n, 1),
+        Some("terrain") => scene::terrain(724, 1).to_soup(),
+        Some("sphereflake") => scene::sphereflake(3, 3).to_soup(),
+        Some("bunny") => scene::bunny().to_soup(),
+        Some(other) => panic!("unknown STRAHL_SCENE {other}"),
+    };
+    let n = soup.len();
+    let normalized = |p: BuildParams| BuildParams {
+        morton_cells: MortonCells::Normalized,
+        ..p
+    };
     let list = [
         ("fastest", BuildParams::fastest()),
         (
@@ -48,6 +62,9 @@ fn speed() {
         ),
         ("balanced", BuildParams::balanced()),
         ("hybrid_sah", BuildParams::hybrid_sah()),
+        ("fastest_normalized", normalized(BuildParams::fastest())),
+        ("ploc_normalized", normalized(BuildParams::ploc())),
+        ("hybrid_sah_normalized", normalized(BuildParams::hybrid_sah())),
         ("median", BuildParams::median()),
         ("quality", BuildParams::quality()),
         (
@@ -92,7 +109,7 @@ fn speed() {
         par_times.sort_by(f64::total_cmp);
         if let (Some(&best), Some(&med)) = (par_times.first(), par_times.get(par_times.len() / 2)) {
             println!(
-                "{name:10} {threads} threads: best {:6.2} Mtri/s ({:7.2} ms, median {:7.2} ms): {:.2}x the best single-threaded",
+                "{name:21} {threads} threads: best {:6.2} Mtri/s ({:7.2} ms, median {:7.2} ms): {:.2}x the best single-threaded",
                 n as f64 / best / 1e6,
                 best * 1e3,
                 med * 1e3,
@@ -101,7 +118,7 @@ fn speed() {
         }
         let v = bvh.validate(&soup[..]).unwrap();
         println!(
-            "{name:10} best {:6.2} Mtri/s ({:7.2} ms, median {:7.2} ms, CPU {:7.2} ms)  SAH {:8.3}  nodes {}  depth {}",
+            "{name:21} best {:6.2} Mtri/s ({:7.2} ms, median {:7.2} ms, CPU {:7.2} ms)  SAH {:8.3}  nodes {}  depth {}",
             n as f64 / times[0] / 1e6,
             times[0] * 1e3,
             times[times.len() / 2] * 1e3,

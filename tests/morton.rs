@@ -187,6 +187,58 @@ proptest! {
     }
 
     #[test]
+    fn extended_cells_are_near_cubic_and_monotone(
+        b in sorted_box(bounded()), p in vec3(raw()), axis in 0usize..3, a in bounded(), c in bounded(),
+    ) {
+        // Every axis's cell length, `1 / scale`, is within a factor sqrt(2) of the longest
+        // extent's `E / 1024` (or the axis is flat, or as long as 1024 halvings allow), and the
+        // x8 kernel agrees with the scalar reference.
+        for bits in [10u32, 21] {
+            let (qe, qn) = (MortonQuantizer::new_extended(&b, bits), MortonQuantizer::new(&b, bits));
+            let (e, se, sn) = (b.extent(), qe.scale(), qn.scale());
+            let longest = e.max_element();
+            for k in 0..3 {
+                if sn[k] == 0.0 {
+                    prop_assert_eq!(se[k], 0.0);
+                    continue;
+                }
+                // A whole number of halvings: the extended scale is the plain one over 2^d.
+                let d = (sn[k] / se[k]).log2();
+                prop_assert!(d == d.round() && (0.0..=bits as f32).contains(&d), "{} {}", sn[k], se[k]);
+                if longest.is_finite() && d < bits as f32 {
+                    // `2^d e` is within sqrt(2) of the longest extent.
+                    let r = (e[k] * d.exp2()) / longest;
+                    prop_assert!(r >= 0.5f32.sqrt() * 0.999 && r <= 2f32.sqrt() * 1.001, "ratio {r}");
+                }
+            }
+            // Cells in range and monotone; the x8 kernel equals the scalar reference.
+            let cells = qe.quantize_scalar(p);
+            prop_assert!(cells.iter().all(|&x| x < 1 << bits));
+            let (lo, hi) = if a <= c { (a, c) } else { (c, a) };
+            let (mut p0, mut p1) = (p, p);
+            p0[axis] = lo;
+            p1[axis] = hi;
+            prop_assert!(qe.quantize_scalar(p0)[axis] <= qe.quantize_scalar(p1)[axis]);
+            let l = |v: f32| f32x8::splat(v);
+            let [x8, y8, z8] = qe.quantize_x8(l(p.x), l(p.y), l(p.z));
+            prop_assert_eq!([x8.to_array()[0], y8.to_array()[0], z8.to_array()[0]], cells);
+        }
+    }
+
+    #[test]
+    fn extended_equals_plain_on_near_cubic_boxes(
+        min in vec3(bounded()), size in 1.0e-3f32..1.0e3, f in vec3(1.0f32..1.41),
+    ) {
+        // Extents within a factor 1.41 < sqrt(2) of each other: no axis is shortened.
+        let b = Aabb::new(min, min + f * size);
+        // (Rounding may stretch the extents of a small box far from the origin.)
+        let e = b.extent();
+        prop_assume!(e.min_element() > 0.0 && e.max_element() < e.min_element() * 1.414);
+        prop_assert_eq!(MortonQuantizer::new_extended(&b, 10), MortonQuantizer::new30(&b));
+        prop_assert_eq!(MortonQuantizer::new_extended(&b, 21), MortonQuantizer::new63(&b));
+    }
+
+    #[test]
     fn slices_equal_scalar(
         pts in proptest::collection::vec(vec3(raw()), 0..40),
         short in 0usize..40,

@@ -17,7 +17,7 @@
 //! only where it hits at an equal `t`, `+0` and `-0` included); any-hit answers agree.
 
 use crate::decode::{Input, Mode};
-use strahl::build::{BuildParams, Bvh2, MortonBits, Refine, Strategy, TreeletParams};
+use strahl::build::{BuildParams, Bvh2, MortonBits, MortonCells, Refine, Strategy, TreeletParams};
 use strahl::geometry::{Hit, Triangle};
 use strahl::intersect::{PreparedRay, watertight};
 use strahl::layout::{Bvh4, Bvh8};
@@ -72,6 +72,10 @@ pub fn builders() -> Vec<BuildParams> {
         BuildParams::fastest(),
         BuildParams {
             morton_bits: MortonBits::Bits63,
+            ..BuildParams::fastest()
+        },
+        BuildParams {
+            morton_cells: MortonCells::Normalized,
             ..BuildParams::fastest()
         },
         BuildParams::median(),

@@ -28,7 +28,7 @@ use super::lbvh::{Code, codes_of, gather, sort_gather30, split_point, walk};
 use super::prims::{Box8, CBounds, PrepInfo, PrimRef, ceil_log2};
 use super::radix::{Item, sort_items};
 use super::{BuildParams, Bvh2, MortonBits, Strategy, topdown};
-use crate::geometry::morton::{MortonQuantizer, morton63_scalar, morton63_x8};
+use crate::geometry::morton::{morton63_scalar, morton63_x8};
 use alloc::vec::Vec;
 
 /// Builds an HLBVH.
@@ -36,7 +36,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
     let cb = info.cbounds.to_aabb();
     match p.morton_bits {
         MortonBits::Bits30 => {
-            let q = MortonQuantizer::new30(&cb);
+            let q = p.quantizer(&cb);
             // The references in Morton order end up in `refs`; the bottoms read them from `alt`.
             sort_gather30(
                 &mut b.refs,
@@ -54,7 +54,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
             c
         }
         MortonBits::Bits63 => {
-            let q = MortonQuantizer::new63(&cb);
+            let q = p.quantizer(&cb);
             codes_of(
                 &b.refs,
                 &mut b.items64,

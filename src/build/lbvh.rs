@@ -103,16 +103,16 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
     } = b;
     match p.morton_bits {
         MortonBits::Bits30 if bottom_up_ok(refs.len(), p) => {
-            let q = MortonQuantizer::new30(&cb);
+            let q = p.quantizer(&cb);
             bucketed30(refs, alt, codes, packed, packed_tmp, &q, p, out)
         }
         MortonBits::Bits30 => {
-            let q = MortonQuantizer::new30(&cb);
+            let q = p.quantizer(&cb);
             sort_gather30(refs, alt, items32, packed, packed_tmp, &q, out);
             walk_sorted(refs, items32, p, out)
         }
         MortonBits::Bits63 => {
-            let q = MortonQuantizer::new63(&cb);
+            let q = p.quantizer(&cb);
             codes_of(
                 refs,
                 items64,

@@ -17,7 +17,7 @@
 //! | [`Median`](Strategy::Median) | (baseline) | `select_nth` on the longest centroid axis, O(n) | O(n log n) |
 //! | [`BinnedSah`](Strategy::BinnedSah) | Wald, "On fast construction of SAH-based BVHs", 2007 | bin three axes (or the longest, [`BinAxes`]) in one pass, sweep the bins, branch-free partition; exact sweep at 8 references or fewer | O(n log n) |
 //! | [`SweepSah`](Strategy::SweepSah) | MacDonald and Booth 1990; Wald, Boulos, Shirley 2007 | sweep every boundary of three pre-sorted lists, stable partition, O(n) | O(n log n) after three radix sorts |
-//! | [`Lbvh`](Strategy::Lbvh) | Lauterbach et al. 2009; Karras 2012 | binary search for the highest differing bit | O(n) after a radix sort |
+//! | [`Lbvh`](Strategy::Lbvh) | Lauterbach et al. 2009; Karras 2012; near-cubic cells of Vinkler et al. 2017 ([`MortonCells`]) | binary search for the highest differing bit | O(n) after a radix sort |
 //! | [`Hlbvh`](Strategy::Hlbvh) | Pantaleoni and Luebke 2010; Garanzha et al. 2011 | LBVH bottoms in clusters of up to [`cluster_size`](BuildParams::cluster_size) codes (SAH leaf collapse), binned SAH over the clusters' boxes on top | O(n) after a radix sort, plus binned SAH over the clusters |
 //! | [`HlbvhSah`](Strategy::HlbvhSah) | HLBVH clusters with Bonsai-style SAH mini-trees (Ganestam et al. 2015) | the binned builder within each cluster, in cache | O(n) sort, plus binned SAH over the clusters and within them |
 //! | [`Ploc`](Strategy::Ploc) | Meister and Bittner 2018 (search radius 1) | Morton-sorted clusters merged bottom-up with the neighbour of smaller union area, where the two prefer each other; one-primitive leaves | O(n log n) after a radix sort; O(n) rounds on even scenes |
@@ -205,6 +205,39 @@
 //! `obvhs` crate's fastest preset (its PLOC, radius 1) takes 51.0 and 134 ms for 502.9. A greedy
 //! sweep that also merged a cluster whose left neighbour was already taken built in 36 ms but to
 //! 505.8; 63-bit codes gave the same cost in 52 ms.
+//!
+//! **Structured scenes, and extended Morton cells** (2026-12-04, Intel Xeon; `STRAHL_SCENE=terrain`
+//! (or `sphereflake`, `soup`) `STRAHL_REPS=2 cargo test --release --test build_speed -- --ignored
+//! --nocapture speed`). SAH cost above `quality()`'s on the three 1M-triangle scenes: the
+//! terrain (`scene::terrain(724, 1)`, centroid bounds 1 x 0.2 x 1), the sphereflake
+//! (`scene::sphereflake(3, 3)`) and the soup:
+//!
+//! | builder | terrain | sphereflake | soup |
+//! |---|---|---|---|
+//! | `fastest()` (LBVH), per-axis cells ([`MortonCells::Normalized`]) | +53.5% | +19.8% | +12.7% |
+//! | `fastest()`, extended cells ([`MortonCells::Extended`], now every preset) | **+24.5%** | +19.8% | +12.7% |
+//! | `ploc()`, per-axis / extended | +50.3% / **+25.0%** | +17.4% | +7.7% |
+//! | `hybrid_sah()`, per-axis / extended | +14.4% / **+7.6%** | +10.7% | +2.8% |
+//! | `fast()` | +5.2% | +9.5% | +3.7% |
+//! | `balanced()` (a probe the same day, `terrain(1024)`) | +0.6% | +2.0% | +0.6% |
+//!
+//! On a plain Morton grid every level of the curve halves all three axes, so on the 5:1 terrain
+//! the short axis is cut as often as the long ones and the LBVH's clusters are flat slabs. With
+//! extended cells ([`MortonQuantizer::new_extended`](crate::geometry::morton::MortonQuantizer::new_extended),
+//! Vinkler et al. 2017) the short axis's cells are `2^d` times longer and its bits start `d`
+//! levels later: the LBVH's and PLOC's excess cost halves, and the scalar reference traces the
+//! terrain's diffuse rays 1.20x (LBVH), 1.15x (PLOC) and 1.07x (`hybrid_sah()`) faster, primary
+//! rays 1.06-1.09x (131,072 and 262,144 rays, best of 2 x 3 rounds taking turns). Scenes within
+//! `sqrt(2)` of a cube (the soup, the sphereflake, the bunny) get the same codes and the same
+//! trees as before; build times are unchanged (best of 2 x 4 rounds taking turns, the order
+//! alternating, extended against per-axis on the terrain: LBVH 45.5 and 45.0 ms, PLOC 69.8 and
+//! 70.8, `hybrid_sah()` 164.0 and 167.4). A cube grid
+//! (every axis cut at the longest extent's cells) did a little better on the terrain (+22.7% for
+//! the LBVH) but worse on the bunny (+20.1% against +15.5%), whose short axis it no longer
+//! bisects. Noted, not solved: `hybrid_sah()`'s "within 3% of `quality()`" holds on the soup
+//! only; on the sphereflake the longest-axis-only sweeps of small ranges and the Morton cluster
+//! boundaries cost most of its 10.7% (16 bins on all axes with clusters of 1,024: +5.9% at about
+//! 3.7x `quality()`'s speed), where `balanced()` is within 2% on every scene at 2.2-2.8x.
 
 mod binned;
 mod builder;
@@ -226,8 +259,8 @@ pub use builder::Builder;
 #[cfg(feature = "std")]
 pub use builder::MAX_THREADS;
 pub use params::{
-    BinAxes, BuildParams, MAX_BINS, MAX_CLUSTER_SIZE, MAX_LEAF_SIZE, MIN_BINS, MIN_DEPTH, MortonBits, Refine, Strategy,
-    TreeletParams,
+    BinAxes, BuildParams, MAX_BINS, MAX_CLUSTER_SIZE, MAX_LEAF_SIZE, MIN_BINS, MIN_DEPTH, MortonBits, MortonCells,
+    Refine, Strategy, TreeletParams,
 };
 pub use prims::{MAX_PRIMITIVES, Primitives};
 pub use rotate::RotationStats;

@@ -129,6 +129,20 @@ pub enum MortonBits {
     Bits63,
 }
 
+/// The Morton grid of the [`Lbvh`](Strategy::Lbvh), [`Hlbvh`](Strategy::Hlbvh),
+/// [`HlbvhSah`](Strategy::HlbvhSah) and [`Ploc`](Strategy::Ploc) builders.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MortonCells {
+    /// Near-cubic cells ([`MortonQuantizer::new_extended`](crate::geometry::morton::MortonQuantizer::new_extended),
+    /// Vinkler et al. 2017): an axis `d` halvings shorter than the longest gets cells `2^d` times
+    /// as long. The same codes as [`Normalized`](Self::Normalized) where the centroid bounds'
+    /// extents are within `sqrt(2)` of each other; much better trees on flat scenes. Every preset.
+    Extended,
+    /// `2^bits` cells on every axis ([`MortonQuantizer::new`](crate::geometry::morton::MortonQuantizer::new)),
+    /// the classic LBVH grid: cells as flat as the scene's box.
+    Normalized,
+}
+
 /// All knobs of the BVH2 builders. Start from a preset and change fields as needed.
 ///
 /// | preset | strategy | bins | leaf size | builds | tree |
@@ -139,7 +153,7 @@ pub enum MortonBits {
 /// | [`quality`](Self::quality) | full-sweep SAH | | 1 ..= 8 | slowest | best |
 /// | [`median`](Self::median) | object median | | 1 ..= 4 | fast | SAH-blind baseline |
 /// | [`hybrid`](Self::hybrid) | HLBVH (clusters of 32) + treelets of 7 | 16 (top) | 1 ..= 4 (SAH collapse) | slow on one core | within 3 to 5% of `quality` |
-/// | [`hybrid_sah`](Self::hybrid_sah) | Morton clusters of 1,024 + binned-SAH mini-trees and top | 8 | 1 ..= 8 | faster than `fast` | within 3% of `quality` |
+/// | [`hybrid_sah`](Self::hybrid_sah) | Morton clusters of 1,024 + binned-SAH mini-trees and top | 8 | 1 ..= 8 | faster than `fast` | within 3% of `quality` on the soup, 8 to 11% on structured scenes |
 ///
 /// Measured throughput and SAH cost of each are in the [module docs](super#measured).
 ///
@@ -177,8 +191,10 @@ pub struct BuildParams {
     pub bins: u32,
     /// Axes binned by [`Strategy::BinnedSah`].
     pub bin_axes: BinAxes,
-    /// Code width of [`Strategy::Lbvh`].
+    /// Code width of [`Strategy::Lbvh`] (and of the other Morton-code builders).
     pub morton_bits: MortonBits,
+    /// Cell shape of the Morton grid of the Morton-code builders.
+    pub morton_cells: MortonCells,
     /// The deepest tree the builder may make (root = depth 1), in `34 ..=`
     /// [`MAX_DEPTH`](crate::traverse::MAX_DEPTH) (at least 34 so that a balanced tree over
     /// `2^31` primitives fits). Where a split would make a subtree that cannot be finished within
@@ -225,6 +241,19 @@ impl Default for BuildParams {
 }
 
 impl BuildParams {
+    /// The Morton quantiser of centroid bounds `cb` for these parameters (code width and cells).
+    pub(crate) fn quantizer(&self, cb: &crate::geometry::Aabb) -> crate::geometry::morton::MortonQuantizer {
+        use crate::geometry::morton::MortonQuantizer;
+        let bits = match self.morton_bits {
+            MortonBits::Bits30 => 10,
+            MortonBits::Bits63 => 21,
+        };
+        match self.morton_cells {
+            MortonCells::Extended => MortonQuantizer::new_extended(cb, bits),
+            MortonCells::Normalized => MortonQuantizer::new(cb, bits),
+        }
+    }
+
     /// The fastest build: LBVH over 30-bit Morton codes, leaves of up to 2 primitives (up to 4
     /// where codes coincide). Measured: two-primitive leaves build about 20% faster than Karras'
     /// single-primitive ones, with an SAH cost within 2% either way.
@@ -238,6 +267,7 @@ impl BuildParams {
             bins: 8,
             bin_axes: BinAxes::All,
             morton_bits: MortonBits::Bits30,
+            morton_cells: MortonCells::Extended,
             max_depth: MAX_DEPTH,
             cluster_size: 32,
             refine: Refine::None,
@@ -319,7 +349,9 @@ impl BuildParams {
     /// of at most 16 on the longest axis), and a binned-SAH top over the clusters. On the
     /// 1M-triangle soup, single-threaded: an SAH cost within 3% of [`quality`](Self::quality)'s
     /// at more than 5 times its speed, and a better tree than [`fast`](Self::fast) in less time
-    /// (measured in the [module docs](super#measured)).
+    /// (measured in the [module docs](super#measured)). Not so on structured scenes: on the 1M
+    /// terrain and sphereflake its tree costs 7.6% and 10.7% more than `quality()`'s, where
+    /// [`balanced`](Self::balanced) stays within 2%.
     ///
     /// ```
     /// use strahl::{build::{Bvh2, BuildParams, Strategy}, scene};

@@ -26,7 +26,7 @@ use super::lbvh::{codes_of, gather, sort_gather30};
 use super::prims::{Box8, PrepInfo, PrimRef};
 use super::radix::sort_items;
 use super::{BuildParams, Bvh2, MortonBits, Node};
-use crate::geometry::morton::{MortonQuantizer, morton63_scalar, morton63_x8};
+use crate::geometry::morton::{morton63_scalar, morton63_x8};
 
 /// A cluster's node: `[index, count]` of a leaf (its sorted position, 1) or `[left child, 0]`.
 type Link = [u32; 2];
@@ -37,7 +37,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
     // The references in Morton order: in `refs` (30-bit codes) or in `alt` (63-bit).
     let sorted_in_alt = match p.morton_bits {
         MortonBits::Bits30 => {
-            let q = MortonQuantizer::new30(&cb);
+            let q = p.quantizer(&cb);
             sort_gather30(
                 &mut b.refs,
                 &mut b.alt,
@@ -50,7 +50,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
             false
         }
         MortonBits::Bits63 => {
-            let q = MortonQuantizer::new63(&cb);
+            let q = p.quantizer(&cb);
             codes_of(
                 &b.refs,
                 &mut b.items64,
