@@ -6,6 +6,7 @@
 //! cargo bench --bench build -- --noplot                       # bunny and the 1M-triangle soup
 //! cargo bench --features embree --bench build -- --noplot     # + Embree 3's rtcBuildBVH
 //! STRAHL_BENCH_SCENES=all cargo bench --bench build -- --noplot   # + 1M terrain, 1M sphereflake
+//! STRAHL_BENCH_SCENES=terrain1M,sphereflake1M cargo bench ...     # any list of the four
 //! cargo bench --bench build -- --noplot build_threads         # the parallel builds only
 //! ```
 //!
@@ -102,13 +103,22 @@ fn rays_for(tris: &[Triangle], count: usize) -> Vec<Ray> {
         .collect()
 }
 
+/// The scenes of `STRAHL_BENCH_SCENES`: `all`, or a comma-separated list of `bunny`, `soup1M`,
+/// `terrain1M`, `sphereflake1M`; unset: the bunny and the soup.
 fn scenes() -> Vec<Scene> {
-    let mut v = vec![
-        ("bunny", scene::bunny().to_soup(), 200_000),
-        ("soup1M", scene::thin_soup(1 << 20, 1), 50_000),
-    ];
-    if std::env::var("STRAHL_BENCH_SCENES").is_ok_and(|s| s == "all") {
+    let pick = std::env::var("STRAHL_BENCH_SCENES").unwrap_or_else(|_| "bunny,soup1M".into());
+    let want = |name: &str| pick == "all" || pick.split(',').any(|s| s == name);
+    let mut v = Vec::new();
+    if want("bunny") {
+        v.push(("bunny", scene::bunny().to_soup(), 200_000));
+    }
+    if want("soup1M") {
+        v.push(("soup1M", scene::thin_soup(1 << 20, 1), 50_000));
+    }
+    if want("terrain1M") {
         v.push(("terrain1M", scene::terrain(724, 1).to_soup(), 50_000));
+    }
+    if want("sphereflake1M") {
         v.push(("sphereflake1M", scene::sphereflake(3, 3).to_soup(), 50_000));
     }
     v.into_iter()
@@ -145,6 +155,13 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
             "binned32-all",
             BuildParams {
                 bins: 32,
+                ..BuildParams::balanced()
+            },
+        ),
+        (
+            "binned64-all",
+            BuildParams {
+                bins: 64,
                 ..BuildParams::balanced()
             },
         ),
