@@ -131,6 +131,18 @@ pub enum MortonBits {
 
 /// The Morton grid of the [`Lbvh`](Strategy::Lbvh), [`Hlbvh`](Strategy::Hlbvh),
 /// [`HlbvhSah`](Strategy::HlbvhSah) and [`Ploc`](Strategy::Ploc) builders.
+///
+/// ```
+/// use strahl::{build::{BuildParams, Bvh2, MortonCells}, scene};
+/// // A terrain: centroid bounds about 1 x 0.2 x 1.
+/// let flat = scene::terrain(32, 1).to_soup();
+/// let p = BuildParams::fastest();
+/// assert_eq!(p.morton_cells, MortonCells::Extended);
+/// let classic = BuildParams { morton_cells: MortonCells::Normalized, ..p };
+/// let (a, _) = Bvh2::build(&flat[..], &p).unwrap();
+/// let (b, _) = Bvh2::build(&flat[..], &classic).unwrap();
+/// assert!(a.sah_cost(1.0, 1.0) < b.sah_cost(1.0, 1.0));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum MortonCells {
     /// Near-cubic cells ([`MortonQuantizer::new_extended`](crate::geometry::morton::MortonQuantizer::new_extended),
