@@ -235,9 +235,13 @@
 //! (every axis cut at the longest extent's cells) did a little better on the terrain (+22.7% for
 //! the LBVH) but worse on the bunny (+20.1% against +15.5%), whose short axis it no longer
 //! bisects. Noted, not solved: `hybrid_sah()`'s "within 3% of `quality()`" holds on the soup
-//! only; on the sphereflake the longest-axis-only sweeps of small ranges and the Morton cluster
-//! boundaries cost most of its 10.7% (16 bins on all axes with clusters of 1,024: +5.9% at about
-//! 3.7x `quality()`'s speed), where `balanced()` is within 2% on every scene at 2.2-2.8x.
+//! only. On the sphereflake the Morton clusters cost most of its 10.7% (the same binning over the
+//! whole scene: +4.1%; 16 bins on all axes with clusters of 1,024: +5.9% at about 3.7x
+//! `quality()`'s speed; any cluster size from 32 to 65,536: +6.9% or more). On the terrain it is
+//! the top over the clusters: the summed node areas per depth part from `balanced()`'s from
+//! depth 3 on (a binned top over Morton patches cannot group triangles by height as top-down
+//! splits do); clusters of 65,536 bring it to +2.3-2.9%. `balanced()` is within 2% on every scene
+//! at 2.2-2.8x `quality()`'s speed.
 
 mod binned;
 mod builder;
