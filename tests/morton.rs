@@ -226,6 +226,25 @@ proptest! {
     }
 
     #[test]
+    fn extended_survives_any_bounds(p in vec3(raw()), b in any_box()) {
+        // NaN, infinite, inverted and empty bounds: finite non-negative scales, cells in range,
+        // flat axes where `new` has them, and the x8 kernel equal to the scalar reference.
+        for bits in [10u32, 21] {
+            let (qe, qn) = (MortonQuantizer::new_extended(&b, bits), MortonQuantizer::new(&b, bits));
+            for k in 0..3 {
+                let s = qe.scale()[k];
+                prop_assert!(s.is_finite() && s >= 0.0 && s <= qn.scale()[k]);
+                prop_assert_eq!(s == 0.0, qn.scale()[k] == 0.0);
+            }
+            let cells = qe.quantize_scalar(p);
+            prop_assert!(cells.iter().all(|&x| x < 1 << bits));
+            let l = |v: f32| f32x8::splat(v);
+            let [x8, y8, z8] = qe.quantize_x8(l(p.x), l(p.y), l(p.z));
+            prop_assert_eq!([x8.to_array()[0], y8.to_array()[0], z8.to_array()[0]], cells);
+        }
+    }
+
+    #[test]
     fn extended_equals_plain_on_near_cubic_boxes(
         min in vec3(bounded()), size in 1.0e-3f32..1.0e3, f in vec3(1.0f32..1.41),
     ) {
