@@ -255,10 +255,10 @@ impl Default for BuildParams {
 impl BuildParams {
     /// The Morton quantiser of centroid bounds `cb` for these parameters (code width and cells).
     pub(crate) fn quantizer(&self, cb: &crate::geometry::Aabb) -> crate::geometry::morton::MortonQuantizer {
-        use crate::geometry::morton::MortonQuantizer;
+        use crate::geometry::morton::{BITS_PER_AXIS_30, BITS_PER_AXIS_63, MortonQuantizer};
         let bits = match self.morton_bits {
-            MortonBits::Bits30 => 10,
-            MortonBits::Bits63 => 21,
+            MortonBits::Bits30 => BITS_PER_AXIS_30,
+            MortonBits::Bits63 => BITS_PER_AXIS_63,
         };
         match self.morton_cells {
             MortonCells::Extended => MortonQuantizer::new_extended(cb, bits),

@@ -199,9 +199,10 @@ impl MortonQuantizer {
     /// Bounding Volume Hierarchy Construction", HPG 2017) in their simplest form. An axis whose
     /// extent `e` is `d` halvings shorter than the longest extent `E` (`d` the integer nearest
     /// `log2(E / e)`, at most `bits_per_axis`) gets cells `2^d` times as long, `scale = 2^bits /
-    /// (2^d e)`, so the code's first `d` levels split only the longer axes and its cells stay
-    /// near-cubic all the way down; the `d` lowest bits of that axis stay 0 (the paper hands them
-    /// to the longer axes; here they are left unused).
+    /// (2^d e)`: its cell index stays below about `2^(bits - d)`, so the code's first `d` levels
+    /// split only the longer axes and its cells stay near-cubic all the way down. That axis's
+    /// top `d` bits stay 0 (the paper hands their resolution to the longer axes; here it is left
+    /// unused).
     ///
     /// On a plain Morton curve every level halves all three axes whatever their lengths, so on a
     /// flat scene (a terrain, a building's floor) the cells are as flat as the scene and the short
