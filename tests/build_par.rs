@@ -152,6 +152,57 @@ fn adversarial_scenes() {
     check("geometric_beside_soup", &tris);
 }
 
+/// Scenes large enough that the first rounds split each node with all threads (chunks of at least
+/// 16,384 references binned and partitioned side by side) and the references are prepared in
+/// parallel (chunks of at least 32,768 primitives), with invalid triangles in every chunk, a flat
+/// cluster (a node whose centroids coincide inside a wide split's round) and a low depth bound.
+#[test]
+fn large_scenes_split_wide() {
+    let mut tris = scene::thin_soup(150_000, 21);
+    for (i, t) in tris.iter_mut().enumerate() {
+        match i % 4_999 {
+            0 => t[1] = Vec3::NAN,
+            1 => t[2] = Vec3::NEG_INFINITY,
+            _ => {}
+        }
+    }
+    // 40,000 copies of one triangle far off: a subtree whose centroids all coincide.
+    let far = [
+        Vec3::new(9.0, 9.0, 9.0),
+        Vec3::new(9.5, 9.0, 9.0),
+        Vec3::new(9.0, 9.5, 9.0),
+    ];
+    tris.extend(std::iter::repeat_n(far, 40_000));
+    let params = [
+        ("fast", BuildParams::fast()),
+        ("balanced", BuildParams::balanced()),
+        (
+            "binned64_depth40",
+            BuildParams {
+                bins: 64,
+                max_depth: 40,
+                ..BuildParams::balanced()
+            },
+        ),
+        (
+            "big_leaves",
+            BuildParams {
+                min_leaf_size: 20_000,
+                max_leaf_size: 30_000,
+                ..BuildParams::fast()
+            },
+        ),
+    ];
+    check_with("wide", &tris, &params, &[2, 3, 5, 16], false);
+    check_with(
+        "wide_clustered",
+        &scene::clustered_soup(120_000, 40, 8),
+        &params[..2],
+        &[4, 16],
+        true,
+    );
+}
+
 #[test]
 fn small_inputs_take_the_single_threaded_path() {
     let mut builder = Builder::new();

@@ -225,3 +225,47 @@ fn bad_plans_are_errors_not_panics() {
     });
     assert!(out.iter().all(|&ok| ok));
 }
+
+/// Sort-first tiles: `render_tiles` and `render_tiles_into` put every pixel in place for image
+/// and tile sizes with partial edge tiles, tiles of 0 (taken as 1), tiles larger than the image
+/// and empty images, on 1 to 9 threads, both assignments; an image buffer of the wrong size is
+/// an error that leaves it untouched; a reused buffer is overwritten everywhere.
+#[test]
+fn tiled_renders_put_every_pixel_in_place() {
+    use strahl::composite::{Assignment, ImageSizeError, render_tiles, render_tiles_into, tiles};
+    let shade = |w: u32, salt: u32| {
+        move |t: strahl::composite::Tile, out: &mut [u32]| {
+            let tw = t.x1 - t.x0;
+            assert_eq!(out.len(), t.pixels());
+            for (i, p) in out.iter_mut().enumerate() {
+                let (x, y) = (t.x0 + i as u32 % tw, t.y0 + i as u32 / tw);
+                *p = (y * w + x) ^ salt;
+            }
+        }
+    };
+    for (w, h) in [(0, 5), (5, 0), (1, 1), (37, 11), (64, 64), (100, 3), (3, 100)] {
+        for size in [0, 1, 7, 16, 64, 1000, u32::MAX] {
+            for threads in [1, 2, 3, 9] {
+                for a in [Assignment::Static, Assignment::Dynamic] {
+                    let (img, stats) = render_tiles(w, h, size, threads, a, shade(w, 0));
+                    assert!(
+                        img.iter().enumerate().all(|(i, &p)| p == i as u32),
+                        "{w}x{h}/{size}/{threads}"
+                    );
+                    assert_eq!(stats.tiles_per_thread.iter().sum::<usize>(), tiles(w, h, size).len());
+                    let mut again = vec![u32::MAX; (w * h) as usize];
+                    for salt in [0x55, 0xAA00] {
+                        render_tiles_into(&mut again, w, h, size, threads, a, shade(w, salt)).unwrap();
+                        assert!(again.iter().enumerate().all(|(i, &p)| p == i as u32 ^ salt));
+                    }
+                }
+            }
+        }
+    }
+    let mut short = vec![7u32; 10];
+    assert_eq!(
+        render_tiles_into(&mut short, 4, 3, 2, 2, Assignment::Dynamic, shade(4, 0)),
+        Err(ImageSizeError { expected: 12, got: 10 })
+    );
+    assert!(short.iter().all(|&p| p == 7));
+}

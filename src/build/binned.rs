@@ -132,23 +132,13 @@ pub(crate) fn find(
     longest_only: bool,
     scratch: &mut Bins,
 ) -> Option<BinSplit> {
-    if longest_only {
-        // One copy of the binning loop per axis, so the axis is a constant.
-        // The longest axis has the smallest non-zero scale (ties: the lowest axis).
-        let s = binning.scale.to_array();
-        let (mut a, mut smallest) = (0, f32::INFINITY);
-        for (i, &si) in s[..3].iter().enumerate() {
-            if si > 0.0 && si < smallest {
-                (a, smallest) = (i, si);
-            }
-        }
-        return match a {
-            0 => find_axes::<1>(refs, binning, bins, scratch),
-            1 => find_axes::<2>(refs, binning, bins, scratch),
-            _ => find_axes::<4>(refs, binning, bins, scratch),
-        };
+    // One copy of the binning loop per axis mask, so the axes are constants.
+    match axes_mask(binning, longest_only) {
+        1 => find_axes::<1>(refs, binning, bins, scratch),
+        2 => find_axes::<2>(refs, binning, bins, scratch),
+        4 => find_axes::<4>(refs, binning, bins, scratch),
+        _ => find_axes::<7>(refs, binning, bins, scratch),
     }
-    find_axes::<7>(refs, binning, bins, scratch)
 }
 
 /// [`find`] on the axes in the bit mask `AXES`.
@@ -159,6 +149,13 @@ fn find_axes<const AXES: u32>(
     bins: usize,
     scratch: &mut Bins,
 ) -> Option<BinSplit> {
+    bin_refs::<AXES>(refs, binning, bins, scratch);
+    sweep::<AXES>(scratch, binning, bins)
+}
+
+/// Resets the bins in use and bins `refs` into `scratch`'s first set (the second merged into it).
+#[inline(always)]
+fn bin_refs<const AXES: u32>(refs: &[PrimRef], binning: &Binning, bins: usize, scratch: &mut Bins) {
     let bins = bins.clamp(2, K);
     let Bins {
         boxes: sets,
@@ -208,6 +205,13 @@ fn find_axes<const AXES: u32>(
             }
         }
     }
+}
+
+/// The cheapest plane over the binned first set of `scratch` (see [`find`]).
+#[inline(always)]
+fn sweep<const AXES: u32>(scratch: &Bins, binning: &Binning, bins: usize) -> Option<BinSplit> {
+    let bins = bins.clamp(2, K);
+    let (boxes, counts) = (&scratch.boxes[0], &scratch.counts[0]);
     let scale = binning.scale.to_array();
     let mut best: Option<BinSplit> = None;
     // Every entry read below is written first (1 ..= bins - 1).
@@ -256,6 +260,76 @@ fn find_axes<const AXES: u32>(
         .iter()
         .fold(Box8::EMPTY, |acc, b| acc.union(*b));
     Some(best)
+}
+
+/// The axes [`find`] bins, as a bit mask: all three, or the longest alone (`longest_only`; the
+/// longest axis has the smallest non-zero scale, ties to the lowest axis).
+pub(crate) fn axes_mask(binning: &Binning, longest_only: bool) -> u32 {
+    if !longest_only {
+        return 7;
+    }
+    let s = binning.scale.to_array();
+    let (mut a, mut smallest) = (0, f32::INFINITY);
+    for (i, &si) in s[..3].iter().enumerate() {
+        if si > 0.0 && si < smallest {
+            (a, smallest) = (i, si);
+        }
+    }
+    1 << a
+}
+
+/// The first half of [`find`], for one chunk of a node's references (the parallel build splits
+/// a large node with its references in chunks, one per thread): resets the bins of the axes in
+/// `mask` ([`axes_mask`]) and bins `refs` into `scratch`.
+#[cfg(feature = "std")]
+pub(crate) fn bin_chunk(refs: &[PrimRef], binning: &Binning, bins: usize, mask: u32, scratch: &mut Bins) {
+    match mask {
+        1 => bin_refs::<1>(refs, binning, bins, scratch),
+        2 => bin_refs::<2>(refs, binning, bins, scratch),
+        4 => bin_refs::<4>(refs, binning, bins, scratch),
+        _ => bin_refs::<7>(refs, binning, bins, scratch),
+    }
+}
+
+/// Sets `into`'s bins (of the axes in `mask`) to the sum of `parts` (each binned by
+/// [`bin_chunk`] with the same arguments): boxes by union, counts by sum, so the result is
+/// exactly that of binning all the chunks at once.
+#[cfg(feature = "std")]
+pub(crate) fn sum_bins(into: &mut Bins, parts: &[Bins], bins: usize, mask: u32) {
+    let bins = bins.clamp(2, K);
+    for a in 0..3 {
+        if mask >> a & 1 != 0 {
+            into.boxes[0][a][..bins].fill(Box8::EMPTY);
+            into.counts[0][a][..bins].fill(0);
+            for other in parts {
+                for i in 0..bins {
+                    into.boxes[0][a][i].grow(other.boxes[0][a][i]);
+                    into.counts[0][a][i] += other.counts[0][a][i];
+                }
+            }
+        }
+    }
+}
+
+/// The second half of [`find`]: the cheapest plane over bins filled by [`bin_chunk`] (and
+/// [`merge_bins`]).
+#[cfg(feature = "std")]
+pub(crate) fn sweep_bins(scratch: &Bins, binning: &Binning, bins: usize, mask: u32) -> Option<BinSplit> {
+    match mask {
+        1 => sweep::<1>(scratch, binning, bins),
+        2 => sweep::<2>(scratch, binning, bins),
+        4 => sweep::<4>(scratch, binning, bins),
+        _ => sweep::<7>(scratch, binning, bins),
+    }
+}
+
+/// How many of a chunk's references, binned into `scratch` by [`bin_chunk`], go left of `split`.
+#[cfg(feature = "std")]
+pub(crate) fn left_count(scratch: &Bins, split: &BinSplit) -> usize {
+    scratch.counts[0][split.axis][..=split.plane]
+        .iter()
+        .map(|&c| c as usize)
+        .sum()
 }
 
 /// Moves `src` into `dst` (same length) partitioned by `split`: the left side at the front, the
@@ -314,6 +388,68 @@ fn partition_axis<const A: usize>(
         CBounds { lo: -nlo, hi }
     };
     (l, side(lacc), side(racc))
+}
+
+/// [`partition_into`] for one chunk of a node's references (the parallel build partitions a
+/// large node in chunks, one per thread): the chunk's left references go, in order, to `left`,
+/// its right ones, the first last, to `right` from its end. With the chunks' pieces laid out as
+/// `[L_0, L_1, .., L_k, R_k, .., R_1, R_0]` the node's order is exactly [`partition_into`]'s.
+/// Returns the two sides' centroid bounds in the negated-min form (`[-lo, hi]`, grown by `max`),
+/// or `None` where the pieces' lengths do not match the chunk's sides (nothing is then to be
+/// trusted in them; the caller splits the node the sequential way, from the untouched `src`).
+#[cfg(feature = "std")]
+pub(crate) fn partition_chunk(
+    src: &[PrimRef],
+    left: &mut [PrimRef],
+    right: &mut [PrimRef],
+    binning: &Binning,
+    split: &BinSplit,
+) -> Option<(f32x8, f32x8)> {
+    match split.axis {
+        0 => partition_chunk_axis::<0>(src, left, right, binning, split.plane),
+        1 => partition_chunk_axis::<1>(src, left, right, binning, split.plane),
+        _ => partition_chunk_axis::<2>(src, left, right, binning, split.plane),
+    }
+}
+
+#[cfg(feature = "std")]
+fn partition_chunk_axis<const A: usize>(
+    src: &[PrimRef],
+    left: &mut [PrimRef],
+    right: &mut [PrimRef],
+    binning: &Binning,
+    plane: usize,
+) -> Option<(f32x8, f32x8)> {
+    let (origin, scale) = (binning.origin.to_array()[A], binning.scale.to_array()[A]);
+    let limit = (plane + 1) as f32;
+    let (mut l, mut r) = (0usize, right.len());
+    let ninf = f32x8::splat(f32::NEG_INFINITY);
+    let (mut lacc, mut racc) = (ninf, ninf);
+    // NOTE: a branch per reference (two separate destination slices leave no room for the
+    // sequential pass's write-to-both trick); this runs only on the top levels of a parallel
+    // build, where the pass is bound by memory traffic.
+    for x in src {
+        let c = x.c2();
+        let cc: f32x8 = bytemuck::cast([-c, c]);
+        // The side test of `partition_axis`: `q >= limit` goes right (a NaN `q` goes left).
+        if (c.to_array()[A] - origin) * scale >= limit {
+            r = r.checked_sub(1)?;
+            *right.get_mut(r)? = *x;
+            racc = cc.max_l(racc);
+        } else {
+            *left.get_mut(l)? = *x;
+            l += 1;
+            lacc = cc.max_l(lacc);
+        }
+    }
+    (l == left.len() && r == 0).then_some((lacc, racc))
+}
+
+/// Centroid bounds from the negated-min form of [`partition_chunk`].
+#[cfg(feature = "std")]
+pub(crate) fn cbounds_of(acc: f32x8) -> CBounds {
+    let [nlo, hi]: [f32x4; 2] = bytemuck::cast(acc);
+    CBounds { lo: -nlo, hi }
 }
 
 /// Ranges of at most this many references are split by [`find_small`], not by binning.

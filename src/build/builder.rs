@@ -120,7 +120,9 @@ impl Builder {
         params: &BuildParams,
         out: &mut Bvh2,
     ) -> Result<BuildStats, BuildError> {
-        self.build_into_with(prims, params, out, 1)
+        params.check()?;
+        let info = prims::prepare(prims, &mut self.refs)?;
+        self.build_prepared(&info, params, out, 1)
     }
 
     /// [`build_into`](Self::build_into) on up to `threads` threads (`std`). The tree is the one
@@ -146,25 +148,27 @@ impl Builder {
     /// assert_eq!(one.sah_cost(1.0, 1.0), two.sah_cost(1.0, 1.0));
     /// ```
     #[cfg(feature = "std")]
-    pub fn build_into_par<P: Primitives + ?Sized>(
+    pub fn build_into_par<P: Primitives + Sync + ?Sized>(
         &mut self,
         prims: &P,
         params: &BuildParams,
         out: &mut Bvh2,
         threads: usize,
     ) -> Result<BuildStats, BuildError> {
-        self.build_into_with(prims, params, out, threads.clamp(1, MAX_THREADS))
+        let threads = threads.clamp(1, MAX_THREADS);
+        params.check()?;
+        let info = prims::prepare_par(prims, &mut self.refs, threads)?;
+        self.build_prepared(&info, params, out, threads)
     }
 
-    fn build_into_with<P: Primitives + ?Sized>(
+    /// The build over the references [`prims::prepare`] left in `self.refs`.
+    fn build_prepared(
         &mut self,
-        prims: &P,
+        info: &prims::PrepInfo,
         params: &BuildParams,
         out: &mut Bvh2,
         threads: usize,
     ) -> Result<BuildStats, BuildError> {
-        params.check()?;
-        let info = prims::prepare(prims, &mut self.refs)?;
         out.nodes.clear();
         out.prim_indices.clear();
         let n = self.refs.len();
@@ -174,11 +178,11 @@ impl Builder {
             Counters::default()
         } else {
             match params.strategy {
-                Strategy::Median | Strategy::BinnedSah => topdown::build(self, &info, params, out, threads),
-                Strategy::SweepSah => sweep::build(self, &info, params, out),
-                Strategy::Lbvh => lbvh::build(self, &info, params, out),
-                Strategy::Hlbvh | Strategy::HlbvhSah => hlbvh::build(self, &info, params, out, threads),
-                Strategy::Ploc => ploc::build(self, &info, params, out),
+                Strategy::Median | Strategy::BinnedSah => topdown::build(self, info, params, out, threads),
+                Strategy::SweepSah => sweep::build(self, info, params, out),
+                Strategy::Lbvh => lbvh::build(self, info, params, out),
+                Strategy::Hlbvh | Strategy::HlbvhSah => hlbvh::build(self, info, params, out, threads),
+                Strategy::Ploc => ploc::build(self, info, params, out),
             }
         };
         debug_assert_eq!(out.prim_indices.len(), n);

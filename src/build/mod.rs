@@ -383,7 +383,7 @@ impl Bvh2 {
     /// assert_eq!(bvh.validate(&soup[..]).unwrap().leaves, stats.leaves);
     /// ```
     #[cfg(feature = "std")]
-    pub fn build_par<P: Primitives + ?Sized>(
+    pub fn build_par<P: Primitives + Sync + ?Sized>(
         prims: &P,
         params: &BuildParams,
         threads: usize,

@@ -22,6 +22,8 @@ use super::builder::{Builder, Counters};
 use super::prims::{Box8, CBounds, PrepInfo, PrimRef, depth_ok};
 use super::small;
 use super::{BinAxes, BuildParams, Bvh2, Strategy};
+#[cfg(feature = "std")]
+use crate::math::{Lane, f32x8};
 use alloc::vec::Vec;
 
 /// A node still to build: its slot, the range of references it covers (valid in `alt` or `refs`),
@@ -127,15 +129,245 @@ pub(crate) fn build_refs_par(
     let mut c = Counters::default();
     let grain = (n / threads.saturating_mul(8)).max(PAR_GRAIN) as u32;
     let mut tasks = alloc::vec![start(n, alt, info, out)];
+    let mut pool = Vec::new();
     loop {
         let (big, done): (Vec<Task>, Vec<Task>) = tasks.into_iter().partition(|t| t.end - t.begin > grain);
         if big.is_empty() {
             build_tasks_par(refs, alt, done, p, out, threads, &mut c, scratch, false);
             return c;
         }
-        tasks = build_tasks_par(refs, alt, big, p, out, threads, &mut c, scratch, true);
+        tasks = if big.len() * 2 <= threads && p.strategy == Strategy::BinnedSah {
+            // Too few tasks to keep the threads busy: split each with all of them.
+            let (mut split, rest) = split_wide(refs, alt, big, p, out, threads, &mut c, &mut pool);
+            split.extend(build_tasks_par(refs, alt, rest, p, out, threads, &mut c, scratch, true));
+            split
+        } else {
+            build_tasks_par(refs, alt, big, p, out, threads, &mut c, scratch, true)
+        };
         tasks.extend(done);
     }
+}
+
+/// A wide split's chunks of references get at least this many each.
+#[cfg(feature = "std")]
+const WIDE_CHUNK: usize = 16_384;
+
+/// Splits each of `tasks` (binned SAH, more than [`PAR_GRAIN`] references each) once, every task's
+/// references cut into chunks binned side by side on up to `threads` threads, then partitioned
+/// side by side into the other buffer (`binned::bin_chunk`, `binned::partition_chunk`): the very
+/// split, order and child bounds of the sequential loop, since bins merge exactly (unions and
+/// sums) and each chunk's side counts place its pieces. Returns the children (two per task split
+/// here) and the tasks to split the sequential way (a leaf, a forced or depth-bounded split, a
+/// flat node: the rare cases, left to [`subtree_with`]), both untouched in `refs` and `alt`.
+#[cfg(feature = "std")]
+#[allow(clippy::too_many_arguments)]
+fn split_wide(
+    refs: &mut [PrimRef],
+    alt: &mut [PrimRef],
+    mut tasks: Vec<Task>,
+    p: &BuildParams,
+    out: &mut Bvh2,
+    threads: usize,
+    c: &mut Counters,
+    pool: &mut Vec<Bins>,
+) -> (Vec<Task>, Vec<Task>) {
+    use core::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    tasks.sort_by_key(|t| t.begin);
+    let disjoint = tasks.windows(2).all(|w| w[0].end <= w[1].begin)
+        && tasks
+            .iter()
+            .all(|t| t.begin <= t.end && t.end as usize <= refs.len().min(alt.len()));
+    if !disjoint {
+        return (Vec::new(), tasks);
+    }
+    let total: usize = tasks.iter().map(|t| (t.end - t.begin) as usize).sum();
+    // Per task: its binning, axes, chunk length and first chunk (in `pool`).
+    struct Plan {
+        binning: Binning,
+        nb: usize,
+        mask: u32,
+        chunk: usize,
+        first: usize,
+        chunks: usize,
+    }
+    let mut plans = Vec::with_capacity(tasks.len());
+    let mut chunks_total = 0;
+    for t in &tasks {
+        let count = (t.end - t.begin) as usize;
+        let nb = p.bins.min(t.end - t.begin);
+        let binning = Binning::new(&t.cb, nb);
+        let k = (threads * count / total.max(1)).clamp(1, (count / WIDE_CHUNK).max(1));
+        let chunk = count.div_ceil(k);
+        let chunks = count.div_ceil(chunk.max(1));
+        let ok = count as u32 > p.min_leaf_size && !binning.is_flat() && chunks >= 2;
+        plans.push(ok.then(|| Plan {
+            mask: binned::axes_mask(&binning, p.bin_axes == BinAxes::Longest),
+            binning,
+            nb: nb as usize,
+            chunk,
+            first: chunks_total,
+            chunks,
+        }));
+        if ok {
+            chunks_total += chunks;
+        }
+    }
+    if pool.len() < chunks_total + 1 {
+        pool.resize_with(chunks_total + 1, Bins::new);
+    }
+    // Each task's range in both buffers: `(holder, other)`.
+    let mut parts: Vec<(&mut [PrimRef], &mut [PrimRef])> = Vec::with_capacity(tasks.len());
+    {
+        let (mut r, mut a) = (&mut refs[..], &mut alt[..]);
+        let mut at = 0usize;
+        for t in &tasks {
+            let (lo, hi) = (t.begin as usize, t.end as usize);
+            let (_, rest) = core::mem::take(&mut r).split_at_mut(lo - at);
+            let (mine, rest) = rest.split_at_mut(hi - lo);
+            r = rest;
+            let (_, arest) = core::mem::take(&mut a).split_at_mut(lo - at);
+            let (amine, arest) = arest.split_at_mut(hi - lo);
+            a = arest;
+            at = hi;
+            parts.push(if t.in_alt { (amine, mine) } else { (mine, amine) });
+        }
+    }
+    // Pass 1: every chunk binned, side by side.
+    let (bins_of_chunks, total_bins) = pool.split_at_mut(chunks_total);
+    {
+        type BinJob<'a> = (&'a [PrimRef], &'a Plan, &'a mut Bins);
+        let mut jobs: Vec<Mutex<Option<BinJob<'_>>>> = Vec::with_capacity(chunks_total);
+        let mut bins_left = &mut bins_of_chunks[..];
+        for (plan, (src, _)) in plans.iter().zip(&parts) {
+            let Some(plan) = plan else { continue };
+            let (mine, rest) = core::mem::take(&mut bins_left).split_at_mut(plan.chunks);
+            bins_left = rest;
+            for (ch, b) in src.chunks(plan.chunk).zip(mine) {
+                jobs.push(Mutex::new(Some((ch, plan, b))));
+            }
+        }
+        let next = AtomicUsize::new(0);
+        crate::par::each(0..threads.min(jobs.len()), |_| {
+            while let Some(job) = jobs.get(next.fetch_add(1, Ordering::Relaxed)) {
+                if let Some((ch, plan, b)) = job.lock().ok().and_then(|mut g| g.take()) {
+                    binned::bin_chunk(ch, &plan.binning, plan.nb, plan.mask, b);
+                }
+            }
+        });
+    }
+    // The splits, from the merged bins, and the checks of the sequential loop.
+    let all = &mut total_bins[0];
+    let mut splits: Vec<Option<binned::BinSplit>> = Vec::with_capacity(tasks.len());
+    for (t, plan) in tasks.iter().zip(&plans) {
+        let split = plan.as_ref().and_then(|plan| {
+            let mine = &bins_of_chunks[plan.first..plan.first + plan.chunks];
+            binned::sum_bins(all, mine, plan.nb, plan.mask);
+            let s = binned::sweep_bins(all, &plan.binning, plan.nb, plan.mask)?;
+            let count = t.end - t.begin;
+            let leaf_cost = p.intersection_cost * count as f32;
+            if count <= p.max_leaf_size && leaf_cost <= split_cost(p, s.cost, t.bounds.half_area_nonempty(), count) {
+                return None;
+            }
+            let (nl, nr) = (s.left_count, count - s.left_count.min(count));
+            let lefts: usize = mine.iter().map(|b| binned::left_count(b, &s)).sum();
+            (nl > 0 && nr > 0 && lefts == nl as usize && depth_ok(t.depth, nl, nr, p.max_depth)).then_some(s)
+        });
+        splits.push(split);
+    }
+    // Pass 2: every chunk partitioned into its pieces of the other buffer, side by side.
+    type PartJob<'a> = (
+        &'a [PrimRef],
+        &'a mut [PrimRef],
+        &'a mut [PrimRef],
+        &'a Binning,
+        &'a binned::BinSplit,
+    );
+    let mut jobs: Vec<Mutex<Option<PartJob<'_>>>> = Vec::with_capacity(chunks_total);
+    let mut job_task = Vec::with_capacity(chunks_total);
+    for (i, ((plan, split), (src, dst))) in plans.iter().zip(&splits).zip(parts.iter_mut()).enumerate() {
+        let (Some(plan), Some(split)) = (plan, split) else {
+            continue;
+        };
+        let mine = &bins_of_chunks[plan.first..plan.first + plan.chunks];
+        let (mut lpart, mut rpart) = dst.split_at_mut(split.left_count as usize);
+        let mut pieces: Vec<(&mut [PrimRef], &mut [PrimRef])> = Vec::with_capacity(plan.chunks);
+        for (ch, b) in src.chunks(plan.chunk).zip(mine) {
+            let nl = binned::left_count(b, split);
+            let (l, rest) = core::mem::take(&mut lpart).split_at_mut(nl);
+            lpart = rest;
+            pieces.push((l, &mut []));
+            let _ = ch;
+        }
+        // The right pieces from the back: chunk 0's at the end.
+        for ((ch, b), piece) in src.chunks(plan.chunk).zip(mine).zip(pieces.iter_mut()).rev() {
+            let nr = ch.len() - binned::left_count(b, split);
+            let (r, rest) = core::mem::take(&mut rpart).split_at_mut(nr);
+            rpart = rest;
+            piece.1 = r;
+        }
+        for (ch, (l, r)) in src.chunks(plan.chunk).zip(pieces) {
+            jobs.push(Mutex::new(Some((ch, l, r, &plan.binning, split))));
+            job_task.push(i);
+        }
+    }
+    let results: Vec<Mutex<Option<(f32x8, f32x8)>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
+    {
+        let next = AtomicUsize::new(0);
+        crate::par::each(0..threads.min(jobs.len()), |_| {
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(job) = jobs.get(i) else { break };
+                if let Some((ch, l, r, binning, split)) = job.lock().ok().and_then(|mut g| g.take()) {
+                    let got = binned::partition_chunk(ch, l, r, binning, split);
+                    if let Ok(mut g) = results[i].lock() {
+                        *g = got;
+                    }
+                }
+            }
+        });
+    }
+    drop(jobs);
+    // Per task, the chunks' centroid bounds merged (`None`: a chunk failed).
+    let ninf = f32x8::splat(f32::NEG_INFINITY);
+    let mut acc: Vec<Option<(f32x8, f32x8)>> = splits.iter().map(|s| s.map(|_| (ninf, ninf))).collect();
+    for (&i, res) in job_task.iter().zip(results) {
+        let got = res.into_inner().ok().flatten();
+        acc[i] = acc[i].zip(got).map(|((la, ra), (l, r))| (l.max_l(la), r.max_l(ra)));
+    }
+    let (mut children, mut rest) = (Vec::new(), Vec::new());
+    for ((t, split), acc) in tasks.into_iter().zip(splits).zip(acc) {
+        let (Some(s), Some((la, ra))) = (split, acc) else {
+            rest.push(t);
+            continue;
+        };
+        c.max_depth = c.max_depth.max(t.depth);
+        let left = out.nodes.len() as u32;
+        out.nodes[t.node as usize] = t.bounds.to_node(left, 0);
+        out.nodes.push(s.left.to_node(0, 0));
+        out.nodes.push(s.right.to_node(0, 0));
+        let mid = t.begin + s.left_count;
+        let in_alt = !t.in_alt;
+        children.push(Task {
+            node: left,
+            begin: t.begin,
+            end: mid,
+            depth: t.depth + 1,
+            in_alt,
+            bounds: s.left,
+            cb: binned::cbounds_of(la),
+        });
+        children.push(Task {
+            node: left + 1,
+            begin: mid,
+            end: t.end,
+            depth: t.depth + 1,
+            in_alt,
+            bounds: s.right,
+            cb: binned::cbounds_of(ra),
+        });
+    }
+    (children, rest)
 }
 
 /// The parallel build does not cut the tree below this many references per task.

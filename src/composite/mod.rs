@@ -61,4 +61,4 @@ pub use sparse::{DecodeError, decode_composite, encode};
 #[cfg(feature = "std")]
 pub use thread::ThreadTransport;
 #[cfg(feature = "std")]
-pub use tiles::{Assignment, Tile, TileStats, render_tiles, tiles};
+pub use tiles::{Assignment, ImageSizeError, Tile, TileStats, render_tiles, render_tiles_into, tiles};

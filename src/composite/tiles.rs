@@ -4,6 +4,7 @@
 //! With a skewed scene (cost concentrated in a few tiles), the static split leaves threads idle
 //! while one finishes its expensive band; the queue keeps every thread busy until the last tile.
 
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 use std::vec::Vec;
@@ -48,9 +49,6 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
     v
 }
 
-/// One thread's rendered tiles and busy seconds.
-type Done<P> = (Vec<(Tile, Vec<P>)>, f64);
-
 /// How tiles are given to threads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Assignment {
@@ -61,7 +59,7 @@ pub enum Assignment {
 }
 
 /// What a tiled render did.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct TileStats {
     /// Tiles rendered by each thread.
     pub tiles_per_thread: Vec<usize>,
@@ -107,23 +105,106 @@ where
     P: Copy + Default + Send,
     F: Fn(Tile, &mut [P]) + Sync,
 {
-    let all = tiles(width, height, tile);
+    let n = width as usize * height as usize;
+    let mut img = std::vec![P::default(); n];
+    // NOTE: the image has exactly `width * height` pixels: no size error.
+    let stats = render_tiles_into(&mut img, width, height, tile, threads, assignment, shade).unwrap_or_default();
+    (img, stats)
+}
+
+/// The image given to [`render_tiles_into`] does not have `width * height` pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageSizeError {
+    /// `width * height`.
+    pub expected: usize,
+    /// The image's length.
+    pub got: usize,
+}
+
+impl core::fmt::Display for ImageSizeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "image has {} pixels, expected width * height = {}",
+            self.got, self.expected
+        )
+    }
+}
+
+impl std::error::Error for ImageSizeError {}
+
+/// [`render_tiles`] into an image the caller keeps (`width * height` pixels in scanline order),
+/// so that a renderer drawing frame after frame allocates nothing per frame. Each thread shades
+/// a tile into a buffer of its own, then copies it into the image band of `tile` rows that holds
+/// it (one lock per band; the threads take tiles in scanline order, so at most a few wait). Every
+/// pixel is written.
+///
+/// ```
+/// use strahl::composite::{Assignment, render_tiles_into};
+/// let mut img = vec![0u32; 37 * 11];
+/// for frame in 1..3 {
+///     render_tiles_into(&mut img, 37, 11, 8, 2, Assignment::Dynamic, |t, out: &mut [u32]| {
+///         for (i, p) in out.iter_mut().enumerate() {
+///             let (x, y) = (t.x0 + i as u32 % (t.x1 - t.x0), t.y0 + i as u32 / (t.x1 - t.x0));
+///             *p = frame * (y * 37 + x);
+///         }
+///     })
+///     .unwrap();
+///     assert!(img.iter().enumerate().all(|(i, &p)| p == frame * i as u32));
+/// }
+/// assert!(render_tiles_into(&mut img, 37, 12, 8, 2, Assignment::Dynamic, |_, _| {}).is_err());
+/// ```
+pub fn render_tiles_into<P, F>(
+    img: &mut [P],
+    width: u32,
+    height: u32,
+    tile: u32,
+    threads: usize,
+    assignment: Assignment,
+    shade: F,
+) -> Result<TileStats, ImageSizeError>
+where
+    P: Copy + Default + Send,
+    F: Fn(Tile, &mut [P]) + Sync,
+{
+    let expected = width as usize * height as usize;
+    if img.len() != expected {
+        return Err(ImageSizeError {
+            expected,
+            got: img.len(),
+        });
+    }
+    let size = tile.max(1);
+    let all = tiles(width, height, size);
     let threads = threads.clamp(1, all.len().max(1));
     let next = AtomicUsize::new(0);
     let start = Instant::now();
-    let per_thread: Vec<Done<P>> = std::thread::scope(|s| {
+    // Bands of `size` rows (the last may be shorter): tile `t` lies in band `t.y0 / size`.
+    let band_len = (width as usize).saturating_mul(size.min(height.max(1)) as usize).max(1);
+    let bands: Vec<Mutex<&mut [P]>> = img.chunks_mut(band_len).map(Mutex::new).collect();
+    let per_thread: Vec<(usize, f64)> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
             .map(|i| {
-                let (all, next, shade) = (&all, &next, &shade);
+                let (all, next, shade, bands) = (&all, &next, &shade, &bands);
                 s.spawn(move || {
-                    let mut done = Vec::new();
-                    let mut busy = 0.0;
+                    let (mut done, mut busy) = (0usize, 0.0);
+                    let mut buf: Vec<P> = Vec::new();
                     let mut work = |t: Tile| {
                         let t0 = Instant::now();
-                        let mut buf = std::vec![P::default(); t.pixels()];
+                        buf.clear();
+                        buf.resize(t.pixels(), P::default());
                         shade(t, &mut buf);
+                        let w = (t.x1 - t.x0) as usize;
+                        let band_y0 = t.y0 - t.y0 % size;
+                        if let Some(band) = bands.get((t.y0 / size) as usize) {
+                            let mut band = band.lock().unwrap_or_else(|e| e.into_inner());
+                            for (row, y) in (t.y0..t.y1).enumerate() {
+                                let at = (y - band_y0) as usize * width as usize + t.x0 as usize;
+                                band[at..at + w].copy_from_slice(&buf[row * w..(row + 1) * w]);
+                            }
+                        }
                         busy += t0.elapsed().as_secs_f64();
-                        done.push((t, buf));
+                        done += 1;
                     };
                     match assignment {
                         Assignment::Static => {
@@ -147,23 +228,11 @@ where
             .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
             .collect()
     });
-    let mut img = std::vec![P::default(); width as usize * height as usize];
-    let mut stats = TileStats {
+    Ok(TileStats {
         wall_seconds: start.elapsed().as_secs_f64(),
-        ..Default::default()
-    };
-    for (done, busy) in per_thread {
-        stats.tiles_per_thread.push(done.len());
-        stats.busy_seconds.push(busy);
-        for (t, buf) in done {
-            let w = (t.x1 - t.x0) as usize;
-            for (row, y) in (t.y0..t.y1).enumerate() {
-                let at = y as usize * width as usize + t.x0 as usize;
-                img[at..at + w].copy_from_slice(&buf[row * w..(row + 1) * w]);
-            }
-        }
-    }
-    (img, stats)
+        tiles_per_thread: per_thread.iter().map(|p| p.0).collect(),
+        busy_seconds: per_thread.iter().map(|p| p.1).collect(),
+    })
 }
 
 #[cfg(test)]
