@@ -651,12 +651,11 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
             packs.extend_from_slice(&pp);
             depth = depth.max(pd);
         }
-        let r = Ok(Self {
+        Ok(Self {
             nodes: super::pages::to_huge_pages(nodes),
             packs,
             depth,
-        });
-        r
+        })
     }
 
     const LANES_MATCH: () = assert!(L::N == N && N <= 8);
