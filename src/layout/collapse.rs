@@ -153,6 +153,121 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
         Ok(out)
     }
 
+    /// The children of the wide node made of binary node `b`, by decreasing surface area.
+    fn kids(&self, b: u32) -> Result<Vec<u32>, CollapseError> {
+        // Open the child with the largest surface area until there are N.
+        let node = *self.bnode(b)?;
+        let mut kids: Vec<u32> = if node.is_leaf() {
+            vec![b]
+        } else if !self.plan.dist.is_empty() {
+            let mut kids = Vec::with_capacity(N);
+            self.plan.open(self.bvh, b, N, &mut kids)?;
+            kids
+        } else {
+            vec![node.left(), node.right()]
+        };
+        while self.plan.dist.is_empty() && kids.len() < N {
+            let mut best = None;
+            for (i, &k) in kids.iter().enumerate() {
+                let n = self.bnode(k)?;
+                if !n.is_leaf() && self.count(k) > N {
+                    let a = half_area(&n.aabb());
+                    if best.is_none_or(|(_, ba)| a > ba) {
+                        best = Some((i, a));
+                    }
+                }
+            }
+            let Some((i, _)) = best else { break };
+            let n = *self.bnode(kids[i])?;
+            kids[i] = n.left();
+            kids.insert(i + 1, n.right());
+        }
+        // Children by decreasing surface area (stable): the any-hit traversal visits them in
+        // slot order, so the likeliest occluders come first.
+        // PERF: shadow rays to random points (BVH8, 262k rays, best of 6-8 taking turns, Intel
+        // Xeon): 1M sphereflake 153 -> 130 ms, bunny 48.4 -> 49.5 ms; closest hits alike.
+        let mut keyed = Vec::with_capacity(kids.len());
+        for &k in &kids {
+            keyed.push((half_area(&self.bnode(k)?.aabb()), k));
+        }
+        keyed.sort_by(|a, b| b.0.total_cmp(&a.0));
+        Ok(keyed.into_iter().map(|(_, k)| k).collect())
+    }
+
+    /// How many wide nodes and packs [`run_from`](Self::run_from) makes from binary node `b`
+    /// (its wide node included), walking the same choices without making them. Used to size the
+    /// output arrays once: growing them by doubling, then copying them onto huge pages, took
+    /// about a fifth of the collapse of the 1M soup (fresh pages evict the triangles it gathers).
+    fn sizes(&self, b: u32) -> Result<(usize, usize), CollapseError> {
+        let (mut nodes, mut packs) = (1usize, 0usize);
+        let mut todo = vec![b];
+        let mut budget = self.bvh.nodes.len();
+        while let Some(b) = todo.pop() {
+            budget = budget.checked_sub(1).ok_or(CollapseError::Malformed)?;
+            for k in self.kids(b)? {
+                let n = self.bnode(k)?;
+                let leaf = if n.is_leaf() {
+                    Some(n.count as usize)
+                } else if self.plan.as_leaf(k, self.count(k), N) {
+                    Some(self.count(k))
+                } else {
+                    None
+                };
+                match leaf {
+                    Some(len) => {
+                        let (ln, lp) = leaf_sizes(len, N);
+                        nodes += ln;
+                        packs += lp;
+                    }
+                    None => {
+                        nodes += 1;
+                        todo.push(k);
+                    }
+                }
+            }
+        }
+        Ok((nodes, packs))
+    }
+
+    /// Output arrays with room for the wide tree made from binary node `b`
+    /// ([`sizes`](Self::sizes)), advised for huge pages where large (see `layout::pages`).
+    #[cfg(feature = "std")]
+    fn presize(&mut self, b: u32) -> Result<(), CollapseError> {
+        let (nodes, packs) = self.sizes(b)?;
+        self.nodes = super::pages::advised_with_capacity(nodes);
+        self.packs = super::pages::advised_with_capacity(packs);
+        Ok(())
+    }
+
+    /// [`Triangles::prefetch`] for the triangles below binary node `b` if it becomes one leaf
+    /// (a binary leaf, or a subtree the plan packs whole); the latter walked with a small fixed
+    /// stack, stopping early where it is deeper than that.
+    #[inline]
+    fn prefetch_triangles(&self, b: u32) {
+        let count = self.count(b);
+        let Ok(n) = self.bnode(b) else { return };
+        if !n.is_leaf() && !self.plan.as_leaf(b, count, N) {
+            return;
+        }
+        let mut stack = [0u32; 16];
+        let (mut top, mut node) = (0usize, *n);
+        loop {
+            if node.is_leaf() {
+                for &p in self.bvh.prim_indices.get(node.prim_range()).unwrap_or(&[]) {
+                    self.tris.prefetch(p as usize);
+                }
+            } else if top + 1 < stack.len() {
+                stack[top] = node.right();
+                stack[top + 1] = node.left();
+                top += 2;
+            }
+            let Some(next) = top.checked_sub(1) else { return };
+            top = next;
+            let Ok(nd) = self.bnode(stack[top]) else { return };
+            node = *nd;
+        }
+    }
+
     fn count(&self, b: u32) -> usize {
         self.counts.get(b as usize).map_or(usize::MAX, |&c| c as usize)
     }
@@ -182,44 +297,14 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
                 jobs.push((b, at, depth));
                 continue;
             }
-            // Open the child with the largest surface area until there are N.
-            let node = *self.bnode(b)?;
-            let mut kids: Vec<u32> = if node.is_leaf() {
-                vec![b]
-            } else if !self.plan.dist.is_empty() {
-                let mut kids = Vec::with_capacity(N);
-                self.plan.open(self.bvh, b, N, &mut kids)?;
-                kids
-            } else {
-                vec![node.left(), node.right()]
-            };
-            while self.plan.dist.is_empty() && kids.len() < N {
-                let mut best = None;
-                for (i, &k) in kids.iter().enumerate() {
-                    let n = self.bnode(k)?;
-                    if !n.is_leaf() && self.count(k) > N {
-                        let a = half_area(&n.aabb());
-                        if best.is_none_or(|(_, ba)| a > ba) {
-                            best = Some((i, a));
-                        }
-                    }
-                }
-                let Some((i, _)) = best else { break };
-                let n = *self.bnode(kids[i])?;
-                kids[i] = n.left();
-                kids.insert(i + 1, n.right());
-            }
-            // Children by decreasing surface area (stable): the any-hit traversal visits them in
-            // slot order, so the likeliest occluders come first.
-            // PERF: shadow rays to random points (BVH8, 262k rays, best of 6-8 taking turns, Intel
-            // Xeon): 1M sphereflake 153 -> 130 ms, bunny 48.4 -> 49.5 ms; closest hits alike.
-            let mut keyed = Vec::with_capacity(kids.len());
+            let kids = self.kids(b)?;
+            // PERF: the leaves' triangles are read in leaf order, at random in the input: asked
+            // for ahead, while the leaves before them are packed (1M soup: about a third of the
+            // collapse went to these misses; with the triangles in leaf order it took 190
+            // against 306 ms).
             for &k in &kids {
-                keyed.push((half_area(&self.bnode(k)?.aabb()), k));
+                self.prefetch_triangles(k);
             }
-            keyed.sort_by(|a, b| b.0.total_cmp(&a.0));
-            kids.clear();
-            kids.extend(keyed.into_iter().map(|(_, k)| k));
             let mut wide = WideNode::<L, N>::empty();
             let mut lo = [[f32::INFINITY; 8]; 3];
             let mut hi = [[f32::NEG_INFINITY; 8]; 3];
@@ -450,6 +535,24 @@ fn best(dl: &[f32; 8], dr: &[f32; 8], i: usize) -> (f32, usize) {
     b
 }
 
+/// Wide nodes and packs that [`Builder::leaf`] makes of `len` primitives, `n` to a pack.
+fn leaf_sizes(len: usize, n: usize) -> (usize, usize) {
+    if len <= MAX_LEAF_PACKS * n {
+        return (0, len.div_ceil(n));
+    }
+    let per = len.div_ceil(n);
+    let (mut nodes, mut packs) = (1, 0);
+    let mut left = len;
+    while left > 0 {
+        let chunk = per.min(left);
+        let (cn, cp) = leaf_sizes(chunk, n);
+        nodes += cn;
+        packs += cp;
+        left -= chunk;
+    }
+    (nodes, packs)
+}
+
 /// `best(dl, dr, i).0` for every `i = 1 ..= 8` at once (lane `i - 1`; `+inf` for `i = 1`): the
 /// same minima (a minimum does not depend on the order it is taken in), without branches.
 #[inline]
@@ -533,13 +636,23 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         };
         let mut b = Builder::<L, N, P>::new(bvh, tris, counts, &plan);
         if !bvh.nodes.is_empty() {
+            // PERF: large trees on transparent huge pages (feature `hugepages`, Linux; see
+            // `layout::pages`): fewer TLB misses in traversal, results unchanged. The arrays are
+            // made at their final size in advised memory (`std`), else moved there at the end.
+            #[cfg(feature = "std")]
+            b.presize(0)?;
             b.run(0)?;
         }
-        // PERF: large trees on transparent huge pages (feature `hugepages`, Linux; see
-        // `layout::pages`): fewer TLB misses in traversal, results unchanged.
+        #[cfg(not(feature = "std"))]
+        let (nodes, packs) = (
+            super::pages::to_huge_pages(b.nodes),
+            super::pages::to_huge_pages(b.packs),
+        );
+        #[cfg(feature = "std")]
+        let (nodes, packs) = (b.nodes, b.packs);
         Ok(Self {
-            nodes: super::pages::to_huge_pages(b.nodes),
-            packs: super::pages::to_huge_pages(b.packs),
+            nodes,
+            packs,
             depth: b.depth,
         })
     }
@@ -607,7 +720,8 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
                 let (b, _, depth) = jobs[j];
                 let mut w = builder();
                 let part = w
-                    .new_node(depth)
+                    .presize(b)
+                    .and_then(|()| w.new_node(depth))
                     .and_then(|at| w.run_from(b, at, depth, None))
                     .map(|()| (w.nodes, w.packs, w.depth));
                 if let Ok(mut g) = parts[j].lock() {
@@ -806,6 +920,49 @@ mod tests {
                     }
                     let made = Plan::new(&bvh, &counts, n_wide).unwrap();
                     assert_eq!(made.leaf, walked.leaf, "{name} {n_wide}");
+                }
+            }
+        }
+    }
+
+    /// `Builder::sizes` predicts exactly the wide nodes and packs the collapse makes (the arrays
+    /// are allocated at that size once), greedy and cost-optimal, 4- and 8-wide, with leaves
+    /// large enough to be split below nodes of their own.
+    #[test]
+    fn sizes_predict_the_output_exactly() {
+        use crate::build::{BuildParams, Builder as Bvh2Builder};
+        let big_leaves = BuildParams {
+            min_leaf_size: 150,
+            max_leaf_size: 300,
+            ..BuildParams::fast()
+        };
+        let soups = [
+            crate::scene::thin_soup(3000, 4),
+            crate::scene::clustered_soup(2500, 6, 2),
+        ];
+        for tris in &soups {
+            for p in [
+                BuildParams::fast(),
+                BuildParams::fastest(),
+                BuildParams::ploc(),
+                big_leaves,
+            ] {
+                let (bvh, _) = Bvh2Builder::new().build(&tris[..], &p).unwrap();
+                let counts = subtree_counts(&bvh).unwrap();
+                fn check<L: Lane, const N: usize>(bvh: &Bvh2, tris: &[Triangle], counts: &[u32], greedy: bool) {
+                    let plan = if greedy {
+                        Plan::default()
+                    } else {
+                        Plan::new(bvh, counts, N).unwrap()
+                    };
+                    let mut b = Builder::<L, N, [Triangle]>::new(bvh, tris, counts, &plan);
+                    let want = b.sizes(0).unwrap();
+                    b.run(0).unwrap();
+                    assert_eq!(want, (b.nodes.len(), b.packs.len()), "N = {N}, greedy {greedy}");
+                }
+                for greedy in [false, true] {
+                    check::<crate::math::f32x8, 8>(&bvh, tris, &counts, greedy);
+                    check::<crate::math::f32x4, 4>(&bvh, tris, &counts, greedy);
                 }
             }
         }

@@ -94,3 +94,18 @@ pub fn ceil(x: f32) -> f32 {
 pub fn sign_bit(x: f32) -> bool {
     x.to_bits() >> 31 != 0
 }
+
+/// Asks the cache for the line holding `p` (a hint: nothing is read, and an address that is not
+/// valid is fine; x86-64 only, a no-op elsewhere).
+#[inline(always)]
+pub(crate) fn prefetch<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: SSE is part of every x86_64 target; a prefetch reads nothing and never faults,
+        // whatever the address.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}

@@ -33,7 +33,6 @@ fn beyond(tnear: f32, tmax: f32) -> bool {
 pub(crate) fn prefetch<L, const N: usize>(bvh: BvhWideRef<'_, L, N>, code: u32) {
     #[cfg(target_arch = "x86_64")]
     {
-        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
         let (p, bytes): (*const u8, usize) = if code & LEAF_BIT == 0 {
             (
                 bvh.nodes.as_ptr().wrapping_add(code as usize).cast(),
@@ -48,9 +47,8 @@ pub(crate) fn prefetch<L, const N: usize>(bvh: BvhWideRef<'_, L, N>, code: u32) 
         };
         let mut off = 0;
         while off < bytes.min(384) {
-            // SAFETY: SSE is part of every x86_64 target; a prefetch reads nothing and never faults
-            // (`wrapping_add` only computes an address, valid or not).
-            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(off).cast()) };
+            // `wrapping_add` only computes an address, valid or not.
+            crate::math::prefetch(p.wrapping_add(off));
             off += 64;
         }
     }
