@@ -231,11 +231,18 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
 
     /// Output arrays with room for the wide tree made from binary node `b`
     /// ([`sizes`](Self::sizes)), advised for huge pages where large (see `layout::pages`).
-    #[cfg(feature = "std")]
     fn presize(&mut self, b: u32) -> Result<(), CollapseError> {
         let (nodes, packs) = self.sizes(b)?;
-        self.nodes = super::pages::advised_with_capacity(nodes);
-        self.packs = super::pages::advised_with_capacity(packs);
+        #[cfg(feature = "std")]
+        {
+            self.nodes = super::pages::advised_with_capacity(nodes);
+            self.packs = super::pages::advised_with_capacity(packs);
+        }
+        #[cfg(not(feature = "std"))]
+        {
+            self.nodes = Vec::with_capacity(nodes);
+            self.packs = Vec::with_capacity(packs);
+        }
         Ok(())
     }
 
@@ -638,21 +645,13 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         if !bvh.nodes.is_empty() {
             // PERF: large trees on transparent huge pages (feature `hugepages`, Linux; see
             // `layout::pages`): fewer TLB misses in traversal, results unchanged. The arrays are
-            // made at their final size in advised memory (`std`), else moved there at the end.
-            #[cfg(feature = "std")]
+            // made at their final size in advised memory.
             b.presize(0)?;
             b.run(0)?;
         }
-        #[cfg(not(feature = "std"))]
-        let (nodes, packs) = (
-            super::pages::to_huge_pages(b.nodes),
-            super::pages::to_huge_pages(b.packs),
-        );
-        #[cfg(feature = "std")]
-        let (nodes, packs) = (b.nodes, b.packs);
         Ok(Self {
-            nodes,
-            packs,
+            nodes: b.nodes,
+            packs: b.packs,
             depth: b.depth,
         })
     }

@@ -33,6 +33,7 @@
 #[cfg(feature = "alloc")]
 mod collapse;
 #[cfg(feature = "alloc")]
+#[cfg(feature = "std")]
 mod pages;
 
 use crate::intersect::{AabbLanes, TriangleLanes};

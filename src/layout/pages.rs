@@ -3,12 +3,12 @@
 //! Traversal of a tree of a million triangles reads nodes and packs scattered over about 100 MB:
 //! on 4 KiB pages many of those reads miss the TLB as well as the cache. Embree allocates its
 //! trees with `madvise(MADV_HUGEPAGE)` (we saw 68 MB of `AnonHugePages` in its process on the
-//! 1M sphereflake); [`to_huge_pages`] gives the wide BVHs the same: a copy into fresh memory
-//! whose range is advised before it is first touched, so the kernel backs its 2 MiB-aligned
+//! 1M sphereflake); the wide BVHs get the same: [`advised_with_capacity`] gives an empty vector
+//! whose range is advised before it is first touched (the collapse sizes its arrays exactly
+//! first), and [`to_huge_pages`] a copy into such memory, so the kernel backs their 2 MiB-aligned
 //! parts with huge pages where `/sys/kernel/mm/transparent_hugepage/enabled` is `madvise` or
-//! `always`. A hint only: where the kernel says no, or THP is `never`, the copy is an ordinary
-//! allocation; results never change. Without the feature, or off Linux, the vector is returned
-//! as it is.
+//! `always`. A hint only: where the kernel says no, or THP is `never`, the memory is an ordinary
+//! allocation; results never change. Without the feature, or off Linux, nothing is advised.
 
 use alloc::vec::Vec;
 
@@ -30,7 +30,6 @@ pub(crate) fn to_huge_pages<T: Copy>(v: Vec<T>) -> Vec<T> {
 
 /// An empty vector with room for `n` elements, advised for transparent huge pages if that is
 /// at least [`MIN_BYTES`] (see the [module docs](self)), to be filled without reallocating.
-#[cfg(feature = "std")]
 pub(crate) fn advised_with_capacity<T>(n: usize) -> Vec<T> {
     let mut v = Vec::<T>::with_capacity(n);
     let bytes = n.saturating_mul(core::mem::size_of::<T>());
