@@ -47,6 +47,12 @@ struct Builder<'a, L, const N: usize, P: ?Sized> {
     plan: &'a Plan,
     nodes: Vec<WideNode<L, N>>,
     packs: Vec<TriangleLanes<L, N>>,
+    /// Where the packs go instead of `packs` (the parallel collapse: a worker's part of the
+    /// output array), and how many are written there.
+    #[cfg(feature = "std")]
+    sink: Option<&'a mut [core::mem::MaybeUninit<TriangleLanes<L, N>>]>,
+    #[cfg(feature = "std")]
+    sunk: usize,
     depth: u32,
 }
 
@@ -64,8 +70,36 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
             plan,
             nodes: Vec::new(),
             packs: Vec::new(),
+            #[cfg(feature = "std")]
+            sink: None,
+            #[cfg(feature = "std")]
+            sunk: 0,
             depth: 0,
         }
+    }
+
+    /// Packs made so far.
+    #[inline]
+    fn pack_count(&self) -> usize {
+        #[cfg(feature = "std")]
+        if self.sink.is_some() {
+            return self.sunk;
+        }
+        self.packs.len()
+    }
+
+    /// Appends a pack (to the sink, if one was given: a full sink is an error, never reached
+    /// where it was sized by [`sizes`](Self::sizes)).
+    #[inline]
+    fn push_pack(&mut self, pack: TriangleLanes<L, N>) -> Result<(), CollapseError> {
+        #[cfg(feature = "std")]
+        if let Some(sink) = self.sink.as_mut() {
+            sink.get_mut(self.sunk).ok_or(CollapseError::TooLarge)?.write(pack);
+            self.sunk += 1;
+            return Ok(());
+        }
+        self.packs.push(pack);
+        Ok(())
     }
 
     /// Packs the primitives `prims` into leaf codes; more than `MAX_LEAF_PACKS * N` go below a
@@ -93,7 +127,7 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
             self.nodes[at] = node;
             return Ok((at as u32, bounds));
         }
-        let first = self.packs.len();
+        let first = self.pack_count();
         if first + prims.len().div_ceil(N) >= 1 << 27 {
             return Err(CollapseError::TooLarge);
         }
@@ -111,9 +145,9 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
                     }
                 }
             }
-            self.packs.push(TriangleLanes::pack(&tris[..chunk.len()], chunk));
+            self.push_pack(TriangleLanes::pack(&tris[..chunk.len()], chunk))?;
         }
-        let count = self.packs.len() - first;
+        let count = self.pack_count() - first;
         Ok((LEAF_BIT | (first as u32) << 4 | (count as u32 - 1), bounds))
     }
 
@@ -705,48 +739,88 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         if top.run_from(0, at, 1, Some((&mut jobs, grain))).is_err() {
             return sequential();
         }
-        // The subtrees side by side, largest first, each into its own arrays.
-        type Done<L, const N: usize> = (Vec<WideNode<L, N>>, Vec<TriangleLanes<L, N>>, u32);
-        type Part<L, const N: usize> = Result<Done<L, N>, CollapseError>;
+        // Each subtree's wide nodes and packs, counted side by side (`sizes`: exact), so that
+        // the packs can go straight to their place in one array made once (no copy after).
         let mut order: Vec<usize> = (0..jobs.len()).collect();
         order.sort_by_key(|&j| core::cmp::Reverse(counts.get(jobs[j].0 as usize).copied().unwrap_or(0)));
-        let parts: Vec<Mutex<Option<Part<L, N>>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
-        let next = AtomicUsize::new(0);
-        crate::par::each(0..threads.min(jobs.len()), |_| {
-            loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(&j) = order.get(i) else { break };
-                let (b, _, depth) = jobs[j];
-                let mut w = builder();
-                let part = w
-                    .presize(b)
-                    .and_then(|()| w.new_node(depth))
-                    .and_then(|at| w.run_from(b, at, depth, None))
-                    .map(|()| (w.nodes, w.packs, w.depth));
-                if let Ok(mut g) = parts[j].lock() {
-                    *g = Some(part);
+        let run_jobs = |f: &(dyn Fn(usize) + Sync)| {
+            let next = AtomicUsize::new(0);
+            crate::par::each(0..threads.min(jobs.len()), |_| {
+                while let Some(&j) = order.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    f(j);
                 }
+            });
+        };
+        let sizes: Vec<Mutex<Option<(usize, usize)>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
+        run_jobs(&|j| {
+            let got = builder().sizes(jobs[j].0).ok();
+            if let Ok(mut g) = sizes[j].lock() {
+                *g = got;
             }
         });
-        // In job order: node i >= 1 of a part goes to `base + i - 1`, node 0 to the job's slot;
-        // its packs follow the packs so far.
-        let mut packs_total = top.packs.len();
-        let mut done: Vec<Done<L, N>> = Vec::with_capacity(jobs.len());
-        for p in parts {
-            let Some(Ok(p)) = p.into_inner().ok().flatten() else {
+        let mut job_sizes = Vec::with_capacity(jobs.len());
+        for s in sizes {
+            let Some(s) = s.into_inner().ok().flatten() else {
                 return sequential();
             };
-            packs_total += p.1.len();
-            done.push(p);
+            job_sizes.push(s);
         }
+        let top_packs = top.packs.len();
+        let packs_total = top_packs + job_sizes.iter().map(|s| s.1).sum::<usize>();
         if packs_total >= 1 << 27 {
             return sequential();
         }
         let mut packs = super::pages::advised_with_capacity(packs_total);
         packs.extend_from_slice(&top.packs);
+        // The subtrees side by side, largest first: wide nodes into arrays of their own, packs
+        // into their parts of `packs`, in job order after the top's.
+        type Done<L, const N: usize> = (Vec<WideNode<L, N>>, usize, u32);
+        type Part<L, const N: usize> = Mutex<Option<Result<Done<L, N>, CollapseError>>>;
+        let parts: Vec<Part<L, N>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
+        {
+            let mut spare = &mut packs.spare_capacity_mut()[..packs_total - top_packs];
+            let mut sinks = Vec::with_capacity(jobs.len());
+            for &(_, p) in &job_sizes {
+                let (mine, rest) = core::mem::take(&mut spare).split_at_mut(p);
+                spare = rest;
+                sinks.push(Mutex::new(Some(mine)));
+            }
+            run_jobs(&|j| {
+                let (b, _, depth) = jobs[j];
+                let Some(sink) = sinks[j].lock().ok().and_then(|mut g| g.take()) else {
+                    return;
+                };
+                let mut w = builder();
+                w.nodes = super::pages::advised_with_capacity(job_sizes[j].0);
+                w.sink = Some(sink);
+                let part = w
+                    .new_node(depth)
+                    .and_then(|at| w.run_from(b, at, depth, None))
+                    .map(|()| (core::mem::take(&mut w.nodes), w.sunk, w.depth));
+                if let Ok(mut g) = parts[j].lock() {
+                    *g = Some(part);
+                }
+            });
+        }
+        let mut done: Vec<Done<L, N>> = Vec::with_capacity(jobs.len());
+        for (p, &(_, want)) in parts.into_iter().zip(&job_sizes) {
+            match p.into_inner().ok().flatten() {
+                Some(Ok(p)) if p.1 == want => done.push(p),
+                _ => return sequential(),
+            }
+        }
+        // SAFETY: `packs` has capacity `packs_total` (made above, never pushed to since) and its
+        // first `top_packs` elements are initialised; the rest of the capacity was cut into one
+        // disjoint part per job, of `job_sizes[j].1` elements, and job `j` wrote its part's first
+        // `p.1` elements, checked above to be all of them (`MaybeUninit::write` at `sunk`, one
+        // more each time). So all `packs_total` elements are initialised.
+        unsafe { packs.set_len(packs_total) };
+        // In job order: node i >= 1 of a part goes to `base + i - 1`, node 0 to the job's slot;
+        // its packs follow the packs before it.
         let (mut nodes, mut depth) = (top.nodes, top.depth);
-        for (&(_, at, _), (pn, pp, pd)) in jobs.iter().zip(done) {
-            let (base, pbase) = (nodes.len() as u32, packs.len() as u32);
+        let mut pbase = top_packs as u32;
+        for (&(_, at, _), (pn, pc, pd)) in jobs.iter().zip(done) {
+            let base = nodes.len() as u32;
             let relocate = |mut node: WideNode<L, N>| {
                 for c in node.child.iter_mut() {
                     *c = if *c == EMPTY_CHILD {
@@ -761,7 +835,7 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
             };
             nodes[at] = relocate(pn[0]);
             nodes.extend(pn[1..].iter().map(|&n| relocate(n)));
-            packs.extend_from_slice(&pp);
+            pbase += pc as u32;
             depth = depth.max(pd);
         }
         Ok(Self {
