@@ -292,8 +292,9 @@ pub(crate) fn bin_chunk(refs: &[PrimRef], binning: &Binning, bins: usize, mask: 
 }
 
 /// Sets `into`'s bins (of the axes in `mask`) to the sum of `parts` (each binned by
-/// [`bin_chunk`] with the same arguments): boxes by union, counts by sum, so the result is
-/// exactly that of binning all the chunks at once.
+/// [`bin_chunk`] with the same arguments): boxes by union, counts by sum, so the result is that
+/// of binning all the chunks at once (bit for bit: the references' bounds hold no -0.0, see
+/// `prims::prepare`, so no union depends on its order).
 #[cfg(feature = "std")]
 pub(crate) fn sum_bins(into: &mut Bins, parts: &[Bins], bins: usize, mask: u32) {
     let bins = bins.clamp(2, K);
@@ -312,7 +313,7 @@ pub(crate) fn sum_bins(into: &mut Bins, parts: &[Bins], bins: usize, mask: u32) 
 }
 
 /// The second half of [`find`]: the cheapest plane over bins filled by [`bin_chunk`] (and
-/// [`merge_bins`]).
+/// [`sum_bins`]).
 #[cfg(feature = "std")]
 pub(crate) fn sweep_bins(scratch: &Bins, binning: &Binning, bins: usize, mask: u32) -> Option<BinSplit> {
     match mask {

@@ -340,8 +340,12 @@ fn prim_ref<P: Primitives + ?Sized>(prims: &P, i: usize) -> Option<PrimRef> {
     // `min + max` imply finite bounds.
     // PERF: about twice as fast as the scalar checks (measured in `prepare` on the 1M soup).
     let b = prims.prim_bounds(i)?;
-    let lo = f32x4::new([b.min.x, b.min.y, b.min.z, 0.0]);
-    let hi = f32x4::new([b.max.x, b.max.y, b.max.z, 0.0]);
+    // `+ 0.0` turns -0.0 into +0.0 (and nothing else): the bounds of nodes are unions of these,
+    // and a union keeps whichever of two equal zeros it met first, so with two signs of zero a
+    // node's box could depend on the order of the unions (the parallel builds sum bins in
+    // another order than the sequential ones).
+    let lo = f32x4::new([b.min.x, b.min.y, b.min.z, 0.0]) + f32x4::ZERO;
+    let hi = f32x4::new([b.max.x, b.max.y, b.max.z, 0.0]) + f32x4::ZERO;
     let (d, c2) = (hi - lo, hi + lo);
     let ok = d.ge(f32x4::ZERO) & (d * f32x4::ZERO).eq(f32x4::ZERO) & (c2 * f32x4::ZERO).eq(f32x4::ZERO);
     (ok.bitmask() & 7 == 7).then(|| PrimRef::from_halves(lo, hi, i as u32))

@@ -16,6 +16,15 @@
 //! range order. Once every task is at most `n / (8 threads)` references (at least
 //! [`PAR_GRAIN`]), a last round builds their whole subtrees. Every split is the one the
 //! sequential loop makes, so the tree is the same; only the nodes' numbering differs.
+//!
+//! A round with at most half as many tasks as threads (the first ones: one task, then two,
+//! ...) would leave threads idle, so its binned-SAH tasks are split wide instead
+//! ([`split_wide`]): each task's references cut into chunks of at least [`WIDE_CHUNK`], the
+//! chunks binned side by side and their bins summed (unions and sums: exactly the sequential
+//! bins, hence the same split), then partitioned side by side, each chunk's references to its own
+//! two pieces of the other buffer, placed by the chunks' side counts so that the order is the
+//! sequential partition's (left references in order, right ones from the end). A split that is
+//! not plain (a leaf, a flat node, a forced or depth-bounded split) goes the sequential way.
 
 use super::binned::{self, Binning, Bins};
 use super::builder::{Builder, Counters};
@@ -158,7 +167,8 @@ const WIDE_CHUNK: usize = 16_384;
 /// split, order and child bounds of the sequential loop, since bins merge exactly (unions and
 /// sums) and each chunk's side counts place its pieces. Returns the children (two per task split
 /// here) and the tasks to split the sequential way (a leaf, a forced or depth-bounded split, a
-/// flat node: the rare cases, left to [`subtree_with`]), both untouched in `refs` and `alt`.
+/// flat node: the rare cases, left to [`subtree_with`]), whose ranges are still valid where they
+/// were (only the other buffer may have been written).
 #[cfg(feature = "std")]
 #[allow(clippy::too_many_arguments)]
 fn split_wide(
@@ -197,7 +207,9 @@ fn split_wide(
         let count = (t.end - t.begin) as usize;
         let nb = p.bins.min(t.end - t.begin);
         let binning = Binning::new(&t.cb, nb);
-        let k = (threads * count / total.max(1)).clamp(1, (count / WIDE_CHUNK).max(1));
+        // In `u64`: `threads * count` can pass `u32::MAX` (32-bit targets).
+        let share = (threads as u64 * count as u64 / total.max(1) as u64).min(usize::MAX as u64) as usize;
+        let k = share.clamp(1, (count / WIDE_CHUNK).max(1));
         let chunk = count.div_ceil(k);
         let chunks = count.div_ceil(chunk.max(1));
         let ok = count as u32 > p.min_leaf_size && !binning.is_flat() && chunks >= 2;
@@ -270,6 +282,8 @@ fn split_wide(
                 return None;
             }
             let (nl, nr) = (s.left_count, count - s.left_count.min(count));
+            // NOTE: equal to `nl` (the bins were summed from these); checked because the pieces
+            // below are cut by it.
             let lefts: usize = mine.iter().map(|b| binned::left_count(b, &s)).sum();
             (nl > 0 && nr > 0 && lefts == nl as usize && depth_ok(t.depth, nl, nr, p.max_depth)).then_some(s)
         });
@@ -842,4 +856,96 @@ pub(crate) fn bounds_of(refs: &[PrimRef]) -> (Box8, CBounds) {
         cb.grow(r.c2());
     }
     (b, cb)
+}
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::*;
+    use crate::build::prims::prepare;
+
+    /// The root of a scene split once by `subtree_with` (sequential) and by `split_wide` on
+    /// `threads` threads: the same children (ranges, boxes, centroid bounds, buffer) and the same
+    /// references in the children's ranges, in the same order. Returns how many tasks
+    /// `split_wide` split (0 or 1).
+    fn compare(tris: &[crate::geometry::Triangle], p: &BuildParams, threads: usize) -> usize {
+        let mut refs = Vec::new();
+        let info = prepare(tris, &mut refs).unwrap();
+        let n = refs.len();
+        let (mut alt, mut out) = (Vec::new(), Bvh2::default());
+        out.prim_indices.resize(n, 0);
+        let root = start(n, &mut alt, &info, &mut out);
+        let (mut seq_refs, mut seq_alt, mut seq_out) = (refs.clone(), alt.clone(), out.clone());
+        let mut want = Vec::new();
+        let (mut bins, mut stack, mut c) = (Bins::new(), Vec::new(), Counters::default());
+        let grain = (root.end - root.begin).saturating_sub(1);
+        let defer = Some((&mut want, grain));
+        subtree_with::<true>(
+            &mut seq_refs,
+            &mut seq_alt,
+            p,
+            &mut seq_out,
+            root.clone(),
+            &mut bins,
+            &mut stack,
+            &mut c,
+            defer,
+            0,
+        );
+        let mut pool = Vec::new();
+        let (got, rest) = split_wide(
+            &mut refs,
+            &mut alt,
+            alloc::vec![root],
+            p,
+            &mut out,
+            threads,
+            &mut c,
+            &mut pool,
+        );
+        if got.is_empty() {
+            assert_eq!(rest.len(), 1);
+            return 0;
+        }
+        assert!(rest.is_empty());
+        assert_eq!(got.len(), 2);
+        want.sort_by_key(|t| t.begin);
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!((g.begin, g.end, g.depth, g.in_alt), (w.begin, w.end, w.depth, w.in_alt));
+            assert_eq!(g.bounds.to_aabb(), w.bounds.to_aabb());
+            assert_eq!(g.cb.to_aabb(), w.cb.to_aabb());
+            let (gb, wb) = if g.in_alt { (&alt, &seq_alt) } else { (&refs, &seq_refs) };
+            for i in g.begin as usize..g.end as usize {
+                assert_eq!(gb[i].index(), wb[i].index(), "reference {i}");
+            }
+        }
+        1
+    }
+
+    #[test]
+    fn split_wide_is_the_sequential_split() {
+        let soup = crate::scene::thin_soup(100_000, 3);
+        let clustered = crate::scene::clustered_soup(70_000, 9, 5);
+        let all = BuildParams::balanced();
+        let bins64 = BuildParams {
+            bins: 64,
+            ..BuildParams::balanced()
+        };
+        for tris in [&soup, &clustered] {
+            for p in [BuildParams::fast(), all, bins64] {
+                for threads in [2, 3, 4, 16] {
+                    assert_eq!(compare(tris, &p, threads), 1);
+                }
+            }
+        }
+        // Every centroid the same: no plain split, left to the sequential path.
+        let t = [crate::Vec3::ZERO, crate::Vec3::X, crate::Vec3::Y];
+        assert_eq!(compare(&alloc::vec![t; 40_000], &BuildParams::fast(), 4), 0);
+        // A leaf is cheaper (huge leaves allowed): left to the sequential path too.
+        let big = BuildParams {
+            max_leaf_size: 200_000,
+            intersection_cost: 1e-6,
+            ..BuildParams::fast()
+        };
+        assert_eq!(compare(&soup, &big, 4), 0);
+    }
 }

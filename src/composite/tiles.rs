@@ -105,7 +105,9 @@ where
     P: Copy + Default + Send,
     F: Fn(Tile, &mut [P]) + Sync,
 {
-    let n = width as usize * height as usize;
+    // NOTE: `width * height` always fits in a 64-bit `usize`; where it does not (32-bit), the
+    // image is empty (and `render_tiles_into` renders nothing into it).
+    let n = (width as usize).checked_mul(height as usize).unwrap_or(0);
     let mut img = std::vec![P::default(); n];
     // NOTE: the image has exactly `width * height` pixels: no size error.
     let stats = render_tiles_into(&mut img, width, height, tile, threads, assignment, shade).unwrap_or_default();
@@ -115,7 +117,7 @@ where
 /// The image given to [`render_tiles_into`] does not have `width * height` pixels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ImageSizeError {
-    /// `width * height`.
+    /// `width * height` (`usize::MAX` where that does not fit in a `usize`).
     pub expected: usize,
     /// The image's length.
     pub got: usize,
@@ -167,8 +169,10 @@ where
     P: Copy + Default + Send,
     F: Fn(Tile, &mut [P]) + Sync,
 {
-    let expected = width as usize * height as usize;
-    if img.len() != expected {
+    // NOTE: `usize::MAX` where `width * height` does not fit (32-bit targets): no image has that
+    // many pixels, so it is an error, not a wrapped size.
+    let expected = (width as usize).saturating_mul(height as usize);
+    if img.len() != expected || expected == usize::MAX {
         return Err(ImageSizeError {
             expected,
             got: img.len(),

@@ -241,8 +241,13 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
             for k in self.kids(b)? {
                 let n = self.bnode(k)?;
                 let leaf = if n.is_leaf() {
-                    Some(n.count as usize)
+                    let prims = self.bvh.prim_indices.get(n.prim_range());
+                    Some(prims.ok_or(CollapseError::Malformed)?.len())
                 } else if self.plan.as_leaf(k, self.count(k), N) {
+                    // More than the tree holds: a malformed tree (left to `run` to report).
+                    if self.count(k) > self.bvh.prim_indices.len() {
+                        return Err(CollapseError::Malformed);
+                    }
                     Some(self.count(k))
                 } else {
                     None
@@ -265,8 +270,14 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
 
     /// Output arrays with room for the wide tree made from binary node `b`
     /// ([`sizes`](Self::sizes)), advised for huge pages where large (see `layout::pages`).
-    fn presize(&mut self, b: u32) -> Result<(), CollapseError> {
-        let (nodes, packs) = self.sizes(b)?;
+    /// Where `sizes` fails (a malformed tree) or gives more packs than leaf codes address, the
+    /// arrays are left as they are: [`run_from`](Self::run_from) then meets and reports the
+    /// error itself, as without this step.
+    fn presize(&mut self, b: u32) {
+        let Ok((nodes, packs)) = self.sizes(b) else { return };
+        if packs >= 1 << 27 {
+            return;
+        }
         #[cfg(feature = "std")]
         {
             self.nodes = super::pages::advised_with_capacity(nodes);
@@ -277,7 +288,6 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
             self.nodes = Vec::with_capacity(nodes);
             self.packs = Vec::with_capacity(packs);
         }
-        Ok(())
     }
 
     /// [`Triangles::prefetch`] for the triangles below binary node `b` if it becomes one leaf
@@ -680,7 +690,7 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
             // PERF: large trees on transparent huge pages (feature `hugepages`, Linux; see
             // `layout::pages`): fewer TLB misses in traversal, results unchanged. The arrays are
             // made at their final size in advised memory.
-            b.presize(0)?;
+            b.presize(0);
             b.run(0)?;
         }
         Ok(Self {
@@ -694,7 +704,8 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// [`MAX_THREADS`](crate::build::MAX_THREADS)): the same tree, node for node and pack for
     /// pack, numbered in another order (the same bytes on every run with the same `threads`).
     /// The cost-optimal plan is made on the calling thread; the wide nodes and packs of subtrees
-    /// of at most `n / (8 threads)` triangles (at least 4,096) side by side. Trees of up to 8,192
+    /// of at most `n / (8 threads)` triangles (at least 4,096) side by side, each subtree's packs
+    /// written straight into its part of the output array (the parts sized by a first pass). Trees of up to 8,192
     /// triangles are collapsed on the calling thread, and so is a tree that cannot be collapsed
     /// (the same error as `from_bvh2`).
     ///
@@ -936,6 +947,13 @@ mod tests {
             prim_indices: vec![0, 1],
         };
         assert_eq!(Bvh8::from_bvh2(&bad, &tris[..]).unwrap_err(), CollapseError::Malformed);
+        // A leaf claiming far more primitives than exist: an error, not an allocation of its size.
+        let bad = Bvh2 {
+            nodes: vec![crate::traverse::Node::leaf(&Aabb::from_points(&t), 0, (1 << 31) - 1)],
+            prim_indices: vec![],
+        };
+        assert_eq!(Bvh8::from_bvh2(&bad, &tris[..]).unwrap_err(), CollapseError::Malformed);
+        assert_eq!(Bvh4::from_bvh2(&bad, &tris[..]).unwrap_err(), CollapseError::Malformed);
         let empty = Bvh8::from_bvh2(&Bvh2::default(), &tris[..]).unwrap();
         assert!(empty.is_empty());
     }
