@@ -153,8 +153,9 @@ fn adversarial_scenes() {
 }
 
 /// Scenes large enough that the first rounds split each node with all threads (chunks of at least
-/// 16,384 references binned and partitioned side by side) and the references are prepared in
-/// parallel (chunks of at least 32,768 primitives), with invalid triangles in every chunk, a flat
+/// 16,384 references binned and partitioned side by side), the references are prepared in
+/// parallel (chunks of at least 32,768 primitives) and the HLBVH's Morton front end runs in
+/// parallel (chunks of at least 65,536), with invalid triangles in every chunk, a flat
 /// cluster (a node whose centroids coincide inside a wide split's round) and a low depth bound.
 #[test]
 fn large_scenes_split_wide() {
@@ -176,6 +177,16 @@ fn large_scenes_split_wide() {
     let params = [
         ("fast", BuildParams::fast()),
         ("balanced", BuildParams::balanced()),
+        // Its Morton codes, scatter and bucket sorts run on the threads too.
+        ("hybrid_sah", BuildParams::hybrid_sah()),
+        (
+            "hlbvh",
+            BuildParams {
+                strategy: Strategy::Hlbvh,
+                max_leaf_size: 4,
+                ..BuildParams::fastest()
+            },
+        ),
         (
             "binned64_depth40",
             BuildParams {

@@ -133,9 +133,11 @@ impl Builder {
     /// Parallel: the checks of the primitives' boxes (in chunks); the median and binned SAH
     /// builders ([`Strategy::Median`], [`Strategy::BinnedSah`]: the top of the tree in rounds,
     /// each splitting every large task once, the round's tasks side by side, or, while there are
-    /// fewer tasks than threads, each binned task with all threads, its references in chunks;
-    /// then the remaining subtrees side by side) and the
-    /// HLBVH with SAH mini-trees ([`Strategy::HlbvhSah`]: the mini-trees side by side). The other
+    /// at most half as many tasks as threads, each binned task with all threads, its references
+    /// in chunks;
+    /// then the remaining subtrees side by side) and the HLBVH ([`Strategy::Hlbvh`],
+    /// [`Strategy::HlbvhSah`]: with 30-bit codes, the Morton codes, the top-digit scatter and the
+    /// bucket sorts in chunks side by side; the SAH mini-trees side by side). The other
     /// strategies, and a refinement pass, run on the calling thread. Up to 8,192 (valid) primitives
     /// the build is single-threaded; `threads` is taken as at least 1 and at most [`MAX_THREADS`].
     /// The primitives are read from several threads, so they must be `Sync`.

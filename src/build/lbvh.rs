@@ -251,27 +251,9 @@ pub(crate) fn sort_gather30(
     // Codes (into `items`, in input order), and the histogram of the top digit.
     let mut start = [0u32; BUCKETS + 1];
     items.resize(n, Item::default());
-    let mut chunks = refs.chunks_exact(8);
-    let mut out_chunks = items.chunks_exact_mut(8);
-    for (c, o) in (&mut chunks).zip(&mut out_chunks) {
-        let mut xyz = [[0.0f32; 8]; 3];
-        for (i, r) in c.iter().enumerate() {
-            let v = r.c2().to_array();
-            xyz[0][i] = v[0];
-            xyz[1][i] = v[1];
-            xyz[2][i] = v[2];
-        }
-        let codes = morton30_x8(f32x8::new(xyz[0]), f32x8::new(xyz[1]), f32x8::new(xyz[2]), q).to_array();
-        for (it, &code) in o.iter_mut().zip(&codes) {
-            it.key = code;
-            start[digit(code)] += 1;
-        }
-    }
-    for (r, it) in chunks.remainder().iter().zip(out_chunks.into_remainder()) {
-        let v = r.c2().to_array();
-        let code = morton30_scalar(Vec3::new(v[0], v[1], v[2]), q);
-        it.key = code;
-        start[digit(code)] += 1;
+    codes30(refs, items, q);
+    for it in items.iter() {
+        start[digit(it.key)] += 1;
     }
     // Exclusive prefix sums: the first slot of each bucket.
     let mut sum = 0u32;
@@ -325,6 +307,178 @@ pub(crate) fn sort_gather30(
             };
             *pi = r.index();
         }
+    }
+}
+
+/// [`sort_gather30`] on up to `threads` threads (`std`): the same order, codes, references and
+/// primitive indices. The references in equal chunks, one per thread: each computes its chunk's
+/// codes and top-digit histogram; the chunks then scatter side by side, each into its own run of
+/// every bucket (runs in chunk order: the order of the stable sequential scatter); then the
+/// buckets are sorted and gathered side by side. Inputs below 65,536 references per thread take
+/// the sequential function.
+#[cfg(feature = "std")]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sort_gather30_par(
+    refs: &mut [PrimRef],
+    alt: &mut Vec<PrimRef>,
+    items: &mut Vec<Item<u32>>,
+    packed: &mut Vec<u64>,
+    packed_tmp: &mut Vec<u64>,
+    q: &MortonQuantizer,
+    out: &mut Bvh2,
+    threads: usize,
+) {
+    use core::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Mutex;
+    const BUCKETS: usize = 1 << TOP_BITS;
+    const SHIFT: u32 = 30 - TOP_BITS;
+    let n = refs.len();
+    let parts = threads.min(n / 65_536);
+    if parts < 2 {
+        sort_gather30(refs, alt, items, packed, packed_tmp, q, out);
+        return;
+    }
+    let digit = |code: u32| (code >> SHIFT) as usize & (BUCKETS - 1);
+    let chunk = n.div_ceil(parts);
+    items.resize(n, Item::default());
+    // NOTE: resized only when the length changes; every slot is written before it is read.
+    if alt.len() != n {
+        alt.resize(n, PrimRef(Default::default()));
+    }
+    out.prim_indices.resize(n, 0);
+    // 1. Codes and histograms, chunk by chunk.
+    type CodeJob<'a> = (&'a [PrimRef], &'a mut [Item<u32>], &'a mut [u32; BUCKETS]);
+    let mut hist = alloc::vec![[0u32; BUCKETS]; parts];
+    {
+        let jobs: Vec<Mutex<Option<CodeJob<'_>>>> = refs
+            .chunks(chunk)
+            .zip(items.chunks_mut(chunk))
+            .zip(hist.iter_mut())
+            .map(|((r, it), h)| Mutex::new(Some((r, it, h))))
+            .collect();
+        let next = AtomicUsize::new(0);
+        crate::par::each(0..parts, |_| {
+            while let Some(job) = jobs.get(next.fetch_add(1, Ordering::Relaxed)) {
+                let Some((r, it, h)) = job.lock().ok().and_then(|mut g| g.take()) else {
+                    continue;
+                };
+                codes30(r, it, q);
+                for i in it.iter() {
+                    h[digit(i.key)] += 1;
+                }
+            }
+        });
+    }
+    // Bucket starts, and each chunk's run in each bucket (bucket-major, chunks in order).
+    let mut start = [0u32; BUCKETS + 1];
+    let mut sum = 0u32;
+    for b in 0..BUCKETS {
+        start[b] = sum;
+        for h in &hist {
+            sum += h[b];
+        }
+    }
+    start[BUCKETS] = sum;
+    // 2. The scatter: chunk `t` writes its references of bucket `b` to its own run of `alt`.
+    {
+        let mut runs: Vec<Vec<&mut [PrimRef]>> = (0..parts).map(|_| Vec::with_capacity(BUCKETS)).collect();
+        let mut rest = &mut alt[..n];
+        for b in 0..BUCKETS {
+            for (t, h) in hist.iter().enumerate() {
+                // NOTE: the length before `take` empties `rest`.
+                let len = (h[b] as usize).min(rest.len());
+                let (run, r) = core::mem::take(&mut rest).split_at_mut(len);
+                rest = r;
+                runs[t].push(run);
+            }
+        }
+        type ScatterJob<'a> = (&'a [PrimRef], &'a [Item<u32>], Vec<&'a mut [PrimRef]>);
+        let jobs: Vec<Mutex<Option<ScatterJob<'_>>>> = refs
+            .chunks(chunk)
+            .zip(items.chunks(chunk))
+            .zip(runs)
+            .map(|((r, it), runs)| Mutex::new(Some((r, it, runs))))
+            .collect();
+        let next = AtomicUsize::new(0);
+        crate::par::each(0..parts, |_| {
+            while let Some(job) = jobs.get(next.fetch_add(1, Ordering::Relaxed)) {
+                let Some((r, it, mut runs)) = job.lock().ok().and_then(|mut g| g.take()) else {
+                    continue;
+                };
+                let mut at = [0usize; BUCKETS];
+                for (r, i) in r.iter().zip(it) {
+                    let d = digit(i.key);
+                    // The run was cut to this chunk's count of digit `d`: in range.
+                    if let Some(slot) = runs[d].get_mut(at[d]) {
+                        *slot = r.with_tag(i.key);
+                    }
+                    at[d] += 1;
+                }
+            }
+        });
+    }
+    // 3. Each bucket sorted and gathered back, side by side.
+    {
+        type BucketJob<'a> = (usize, &'a mut [PrimRef], &'a mut [Item<u32>], &'a mut [u32]);
+        let (mut r, mut it, mut pi) = (&mut refs[..], &mut items[..n], &mut out.prim_indices[..n]);
+        let mut jobs: Vec<Mutex<Option<BucketJob<'_>>>> = Vec::with_capacity(BUCKETS);
+        for w in start.windows(2) {
+            // NOTE: the lengths before `take` empties the slices.
+            let len = ((w[1] - w[0]) as usize).min(r.len()).min(it.len()).min(pi.len());
+            let (a, ra) = core::mem::take(&mut r).split_at_mut(len);
+            let (b, rb) = core::mem::take(&mut it).split_at_mut(len);
+            let (c, rc) = core::mem::take(&mut pi).split_at_mut(len);
+            (r, it, pi) = (ra, rb, rc);
+            jobs.push(Mutex::new(Some((w[0] as usize, a, b, c))));
+        }
+        let alt = &alt[..n];
+        let next = AtomicUsize::new(0);
+        crate::par::each(0..parts, |_| {
+            let (mut keys, mut tmp) = (Vec::new(), Vec::new());
+            while let Some(job) = jobs.get(next.fetch_add(1, Ordering::Relaxed)) {
+                let Some((a, dr, di, dp)) = job.lock().ok().and_then(|mut g| g.take()) else {
+                    continue;
+                };
+                let src = &alt[a..a + dr.len()];
+                keys.clear();
+                keys.extend(src.iter().enumerate().map(|(j, r)| (r.tag() as u64) << 32 | j as u64));
+                sort_bucket(&mut keys, &mut tmp);
+                for (j, ((d, it), pi)) in dr.iter_mut().zip(di.iter_mut()).zip(dp.iter_mut()).enumerate() {
+                    let k = keys[j];
+                    // `k as u32` is a position in the bucket: in range.
+                    let r = src.get(k as u32 as usize).map_or(*d, |r| r.with_tag(0));
+                    *d = r;
+                    *it = Item {
+                        key: (k >> 32) as u32,
+                        val: (a + j) as u32,
+                    };
+                    *pi = r.index();
+                }
+            }
+        });
+    }
+}
+
+/// The 30-bit codes of `refs`' doubled centroids into `items`' keys (as long), eight at a time.
+fn codes30(refs: &[PrimRef], items: &mut [Item<u32>], q: &MortonQuantizer) {
+    let mut chunks = refs.chunks_exact(8);
+    let mut out_chunks = items.chunks_exact_mut(8);
+    for (c, o) in (&mut chunks).zip(&mut out_chunks) {
+        let mut xyz = [[0.0f32; 8]; 3];
+        for (i, r) in c.iter().enumerate() {
+            let v = r.c2().to_array();
+            xyz[0][i] = v[0];
+            xyz[1][i] = v[1];
+            xyz[2][i] = v[2];
+        }
+        let codes = morton30_x8(f32x8::new(xyz[0]), f32x8::new(xyz[1]), f32x8::new(xyz[2]), q).to_array();
+        for (it, &code) in o.iter_mut().zip(&codes) {
+            it.key = code;
+        }
+    }
+    for (r, it) in chunks.remainder().iter().zip(out_chunks.into_remainder()) {
+        let v = r.c2().to_array();
+        it.key = morton30_scalar(Vec3::new(v[0], v[1], v[2]), q);
     }
 }
 
@@ -869,6 +1023,60 @@ mod tests {
         assert_eq!(out.prim_indices, want_out.prim_indices);
         let bits = |v: &[PrimRef]| v.iter().map(|r| bytemuck::cast::<_, [u32; 8]>(r.0)).collect::<Vec<_>>();
         assert_eq!(bits(&refs), bits(&want_sorted), "lane 7 must be cleared");
+    }
+
+    /// The parallel front end gives the sequential one's codes, references (bit for bit) and
+    /// primitive indices, on spread, gridded and clustered boxes and thread counts that leave
+    /// ragged last chunks.
+    #[cfg(feature = "std")]
+    #[test]
+    fn sort_gather30_par_matches_sequential() {
+        let mut r = Rng::new(12);
+        let n = 200_003;
+        let spread: Vec<Aabb> = (0..n)
+            .map(|_| {
+                let p = Vec3::new(r.range(-1.0, 1.0), r.range(-1.0, 1.0), r.range(-1.0, 1.0));
+                Aabb::new(p, p + Vec3::splat(0.01))
+            })
+            .collect();
+        let grid: Vec<Aabb> = spread
+            .iter()
+            .map(|a| {
+                let p = (a.min * 3.0).round();
+                Aabb::new(p, p + Vec3::ONE)
+            })
+            .collect();
+        let mut cluster: Vec<Aabb> = spread.iter().map(|a| Aabb::new(a.min * 1e-3, a.max * 1e-3)).collect();
+        cluster.push(Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0)));
+        for boxes in [&spread, &grid, &cluster] {
+            let mut refs = Vec::new();
+            let info = prepare(&boxes[..], &mut refs).unwrap();
+            let q = MortonQuantizer::new(&info.cbounds.to_aabb(), 10);
+            let bits = |v: &[PrimRef]| v.iter().map(|r| bytemuck::cast::<_, [u32; 8]>(r.0)).collect::<Vec<_>>();
+            let keys = |v: &[Item<u32>]| v.iter().map(|it| (it.key, it.val)).collect::<Vec<_>>();
+            let (mut alt, mut items, mut packed, mut tmp, mut want) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Bvh2::default());
+            let mut seq = refs.clone();
+            sort_gather30(&mut seq, &mut alt, &mut items, &mut packed, &mut tmp, &q, &mut want);
+            let want_items = keys(&items);
+            for threads in [2, 3, 16] {
+                let mut par = refs.clone();
+                let mut out = Bvh2::default();
+                sort_gather30_par(
+                    &mut par,
+                    &mut alt,
+                    &mut items,
+                    &mut packed,
+                    &mut tmp,
+                    &q,
+                    &mut out,
+                    threads,
+                );
+                assert_eq!(bits(&par), bits(&seq), "{threads} threads");
+                assert_eq!(keys(&items), want_items, "{threads} threads");
+                assert_eq!(out.prim_indices, want.prim_indices, "{threads} threads");
+            }
+        }
     }
 
     #[test]
