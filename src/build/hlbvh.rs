@@ -24,7 +24,7 @@
 
 use super::binned::Bins;
 use super::builder::{Builder, Counters};
-use super::lbvh::{Code, codes_of, gather, split_point, walk};
+use super::lbvh::{Code, codes_of, gather, sort_gather30_par, split_point, walk};
 use super::prims::{Box8, CBounds, PrepInfo, PrimRef, ceil_log2};
 use super::radix::{Item, sort_items};
 use super::{BuildParams, Bvh2, MortonBits, Strategy, topdown};
@@ -38,8 +38,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
         MortonBits::Bits30 => {
             let q = p.quantizer(&cb);
             // The references in Morton order end up in `refs`; the bottoms read them from `alt`.
-            #[cfg(feature = "std")]
-            super::lbvh::sort_gather30_par(
+            sort_gather30_par(
                 &mut b.refs,
                 &mut b.alt,
                 &mut b.items32,
@@ -48,16 +47,6 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 &q,
                 out,
                 threads,
-            );
-            #[cfg(not(feature = "std"))]
-            super::lbvh::sort_gather30(
-                &mut b.refs,
-                &mut b.alt,
-                &mut b.items32,
-                &mut b.packed,
-                &mut b.packed_tmp,
-                &q,
-                out,
             );
             core::mem::swap(&mut b.refs, &mut b.alt);
             let mut codes = core::mem::take(&mut b.items32);

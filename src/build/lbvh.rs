@@ -284,29 +284,15 @@ pub(crate) fn sort_gather30(
         if a >= b {
             continue;
         }
-        packed.clear();
-        packed.extend(
-            alt[a..b]
-                .iter()
-                .enumerate()
-                .map(|(j, r)| (r.tag() as u64) << 32 | j as u64),
+        sort_bucket_gather(
+            a,
+            &alt[a..b],
+            &mut refs[a..b],
+            &mut items[a..b],
+            &mut out.prim_indices[a..b],
+            packed,
+            packed_tmp,
         );
-        sort_bucket(packed, packed_tmp);
-        let src = &alt[a..b];
-        let dst = refs[a..b]
-            .iter_mut()
-            .zip(&mut items[a..b])
-            .zip(&mut out.prim_indices[a..b]);
-        for (((d, it), pi), (j, &k)) in dst.zip(packed.iter().enumerate()) {
-            // `k as u32` is a position in the bucket: in range.
-            let r = src.get(k as u32 as usize).map_or(*d, |r| r.with_tag(0));
-            *d = r;
-            *it = Item {
-                key: (k >> 32) as u32,
-                val: (a + j) as u32,
-            };
-            *pi = r.index();
-        }
     }
 }
 
@@ -314,9 +300,8 @@ pub(crate) fn sort_gather30(
 /// primitive indices. The references in equal chunks, one per thread: each computes its chunk's
 /// codes and top-digit histogram; the chunks then scatter side by side, each into its own run of
 /// every bucket (runs in chunk order: the order of the stable sequential scatter); then the
-/// buckets are sorted and gathered side by side. Inputs below 65,536 references per thread take
-/// the sequential function.
-#[cfg(feature = "std")]
+/// buckets are sorted and gathered side by side. Inputs below 65,536 references per thread (and
+/// builds without `std`) take the sequential function.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sort_gather30_par(
     refs: &mut [PrimRef],
@@ -328,16 +313,31 @@ pub(crate) fn sort_gather30_par(
     out: &mut Bvh2,
     threads: usize,
 ) {
+    let parts = threads.min(refs.len() / 65_536);
+    #[cfg(feature = "std")]
+    if parts >= 2 {
+        sort_gather30_chunks(refs, alt, items, q, out, parts);
+        return;
+    }
+    let _ = parts;
+    sort_gather30(refs, alt, items, packed, packed_tmp, q, out);
+}
+
+/// [`sort_gather30_par`] in `parts` chunks.
+#[cfg(feature = "std")]
+fn sort_gather30_chunks(
+    refs: &mut [PrimRef],
+    alt: &mut Vec<PrimRef>,
+    items: &mut Vec<Item<u32>>,
+    q: &MortonQuantizer,
+    out: &mut Bvh2,
+    parts: usize,
+) {
     use core::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Mutex;
     const BUCKETS: usize = 1 << TOP_BITS;
     const SHIFT: u32 = 30 - TOP_BITS;
     let n = refs.len();
-    let parts = threads.min(n / 65_536);
-    if parts < 2 {
-        sort_gather30(refs, alt, items, packed, packed_tmp, q, out);
-        return;
-    }
     let digit = |code: u32| (code >> SHIFT) as usize & (BUCKETS - 1);
     let chunk = n.div_ceil(parts);
     items.resize(n, Item::default());
@@ -439,31 +439,57 @@ pub(crate) fn sort_gather30_par(
                 let Some((a, dr, di, dp)) = job.lock().ok().and_then(|mut g| g.take()) else {
                     continue;
                 };
-                let src = &alt[a..a + dr.len()];
-                keys.clear();
-                keys.extend(src.iter().enumerate().map(|(j, r)| (r.tag() as u64) << 32 | j as u64));
-                sort_bucket(&mut keys, &mut tmp);
-                for (j, ((d, it), pi)) in dr.iter_mut().zip(di.iter_mut()).zip(dp.iter_mut()).enumerate() {
-                    let k = keys[j];
-                    // `k as u32` is a position in the bucket: in range.
-                    let r = src.get(k as u32 as usize).map_or(*d, |r| r.with_tag(0));
-                    *d = r;
-                    *it = Item {
-                        key: (k >> 32) as u32,
-                        val: (a + j) as u32,
-                    };
-                    *pi = r.index();
-                }
+                sort_bucket_gather(a, &alt[a..a + dr.len()], dr, di, dp, &mut keys, &mut tmp);
             }
         });
     }
 }
 
+/// Sorts one bucket of [`sort_gather30`] (its references `src`, tagged with their codes, from
+/// slot `a` on) by `(code, position)` and gathers it into `refs` (tags cleared), `items` (codes,
+/// and their slots as values) and `prim_indices`, all as long as `src`. `keys` and `tmp` are
+/// scratch.
+fn sort_bucket_gather(
+    a: usize,
+    src: &[PrimRef],
+    refs: &mut [PrimRef],
+    items: &mut [Item<u32>],
+    prim_indices: &mut [u32],
+    keys: &mut Vec<u64>,
+    tmp: &mut Vec<u64>,
+) {
+    keys.clear();
+    keys.extend(src.iter().enumerate().map(|(j, r)| (r.tag() as u64) << 32 | j as u64));
+    sort_bucket(keys, tmp);
+    let dst = refs.iter_mut().zip(items.iter_mut()).zip(prim_indices.iter_mut());
+    for (((d, it), pi), (j, &k)) in dst.zip(keys.iter().enumerate()) {
+        // `k as u32` is a position in the bucket: in range.
+        let r = src.get(k as u32 as usize).map_or(*d, |r| r.with_tag(0));
+        *d = r;
+        *it = Item {
+            key: (k >> 32) as u32,
+            val: (a + j) as u32,
+        };
+        *pi = r.index();
+    }
+}
+
 /// The 30-bit codes of `refs`' doubled centroids into `items`' keys (as long), eight at a time.
 fn codes30(refs: &[PrimRef], items: &mut [Item<u32>], q: &MortonQuantizer) {
+    each_code30(refs, q, |i, code| {
+        if let Some(it) = items.get_mut(i) {
+            it.key = code;
+        }
+    });
+}
+
+/// `f(i, code)` for the 30-bit code of every reference's doubled centroid, in order, eight at a
+/// time.
+#[inline(always)]
+fn each_code30(refs: &[PrimRef], q: &MortonQuantizer, mut f: impl FnMut(usize, u32)) {
     let mut chunks = refs.chunks_exact(8);
-    let mut out_chunks = items.chunks_exact_mut(8);
-    for (c, o) in (&mut chunks).zip(&mut out_chunks) {
+    let mut at = 0;
+    for c in &mut chunks {
         let mut xyz = [[0.0f32; 8]; 3];
         for (i, r) in c.iter().enumerate() {
             let v = r.c2().to_array();
@@ -472,13 +498,14 @@ fn codes30(refs: &[PrimRef], items: &mut [Item<u32>], q: &MortonQuantizer) {
             xyz[2][i] = v[2];
         }
         let codes = morton30_x8(f32x8::new(xyz[0]), f32x8::new(xyz[1]), f32x8::new(xyz[2]), q).to_array();
-        for (it, &code) in o.iter_mut().zip(&codes) {
-            it.key = code;
+        for (j, &code) in codes.iter().enumerate() {
+            f(at + j, code);
         }
+        at += 8;
     }
-    for (r, it) in chunks.remainder().iter().zip(out_chunks.into_remainder()) {
+    for (j, r) in chunks.remainder().iter().enumerate() {
         let v = r.c2().to_array();
-        it.key = morton30_scalar(Vec3::new(v[0], v[1], v[2]), q);
+        f(at + j, morton30_scalar(Vec3::new(v[0], v[1], v[2]), q));
     }
 }
 
@@ -919,28 +946,12 @@ fn bucketed30(
     // Codes (into `codes`, in input order), and the histogram of the top digit.
     let mut start = [0u32; BUCKETS + 1];
     codes.resize(n, 0);
-    let mut chunks = refs.chunks_exact(8);
-    let mut out_chunks = codes.chunks_exact_mut(8);
-    for (c, o) in (&mut chunks).zip(&mut out_chunks) {
-        let mut xyz = [[0.0f32; 8]; 3];
-        for (i, r) in c.iter().enumerate() {
-            let v = r.c2().to_array();
-            xyz[0][i] = v[0];
-            xyz[1][i] = v[1];
-            xyz[2][i] = v[2];
+    each_code30(refs, q, |i, code| {
+        if let Some(c) = codes.get_mut(i) {
+            *c = code;
         }
-        let k = morton30_x8(f32x8::new(xyz[0]), f32x8::new(xyz[1]), f32x8::new(xyz[2]), q).to_array();
-        for (it, &code) in o.iter_mut().zip(&k) {
-            *it = code;
-            start[digit(code)] += 1;
-        }
-    }
-    for (r, it) in chunks.remainder().iter().zip(out_chunks.into_remainder()) {
-        let v = r.c2().to_array();
-        let code = morton30_scalar(Vec3::new(v[0], v[1], v[2]), q);
-        *it = code;
         start[digit(code)] += 1;
-    }
+    });
     // Exclusive prefix sums: the first slot of each bucket.
     let mut sum = 0u32;
     for c in start.iter_mut() {

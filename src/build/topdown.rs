@@ -157,6 +157,32 @@ pub(crate) fn build_refs_par(
     }
 }
 
+/// The ranges of `tasks` (disjoint, sorted by start, within both buffers: the callers check) in
+/// `refs` and in `alt`, as separate slices: `(refs part, alt part)` per task.
+#[cfg(feature = "std")]
+fn task_ranges<'a>(
+    refs: &'a mut [PrimRef],
+    alt: &'a mut [PrimRef],
+    tasks: &[Task],
+) -> Vec<(&'a mut [PrimRef], &'a mut [PrimRef])> {
+    let mut parts = Vec::with_capacity(tasks.len());
+    let (mut r, mut a) = (refs, alt);
+    let mut at = 0usize;
+    for t in tasks {
+        // Disjoint and in order: `at <= lo <= hi`, within what is left.
+        let (lo, hi) = (t.begin as usize, t.end as usize);
+        let (_, rest) = core::mem::take(&mut r).split_at_mut(lo - at);
+        let (mine, rest) = rest.split_at_mut(hi - lo);
+        r = rest;
+        let (_, arest) = core::mem::take(&mut a).split_at_mut(lo - at);
+        let (amine, arest) = arest.split_at_mut(hi - lo);
+        a = arest;
+        at = hi;
+        parts.push((mine, amine));
+    }
+    parts
+}
+
 /// A wide split's chunks of references get at least this many each.
 #[cfg(feature = "std")]
 const WIDE_CHUNK: usize = 16_384;
@@ -229,22 +255,11 @@ fn split_wide(
         pool.resize_with(chunks_total + 1, Bins::new);
     }
     // Each task's range in both buffers: `(holder, other)`.
-    let mut parts: Vec<(&mut [PrimRef], &mut [PrimRef])> = Vec::with_capacity(tasks.len());
-    {
-        let (mut r, mut a) = (&mut refs[..], &mut alt[..]);
-        let mut at = 0usize;
-        for t in &tasks {
-            let (lo, hi) = (t.begin as usize, t.end as usize);
-            let (_, rest) = core::mem::take(&mut r).split_at_mut(lo - at);
-            let (mine, rest) = rest.split_at_mut(hi - lo);
-            r = rest;
-            let (_, arest) = core::mem::take(&mut a).split_at_mut(lo - at);
-            let (amine, arest) = arest.split_at_mut(hi - lo);
-            a = arest;
-            at = hi;
-            parts.push(if t.in_alt { (amine, mine) } else { (mine, amine) });
-        }
-    }
+    let mut parts: Vec<(&mut [PrimRef], &mut [PrimRef])> = task_ranges(refs, alt, &tasks)
+        .into_iter()
+        .zip(&tasks)
+        .map(|((r, a), t)| if t.in_alt { (a, r) } else { (r, a) })
+        .collect();
     // Pass 1: every chunk binned, side by side.
     let (bins_of_chunks, total_bins) = pool.split_at_mut(chunks_total);
     {
@@ -452,22 +467,11 @@ pub(crate) fn build_tasks_par(
     // One job per task: the task rebased to its own slices of both buffers.
     type Job<'a> = (Task, &'a mut [PrimRef], &'a mut [PrimRef]);
     let mut jobs: Vec<Mutex<Option<Job<'_>>>> = Vec::with_capacity(tasks.len());
-    let (mut r, mut a) = (&mut refs[..], &mut alt[..]);
-    let mut at = 0usize;
-    for t in &tasks {
-        // Disjoint and in order (checked above): `at <= lo <= hi`, within what is left.
-        let (lo, hi) = (t.begin as usize, t.end as usize);
-        let (_, rest) = core::mem::take(&mut r).split_at_mut(lo - at);
-        let (mine, rest) = rest.split_at_mut(hi - lo);
-        r = rest;
-        let (_, arest) = core::mem::take(&mut a).split_at_mut(lo - at);
-        let (amine, arest) = arest.split_at_mut(hi - lo);
-        a = arest;
-        at = hi;
+    for ((mine, amine), t) in task_ranges(refs, alt, &tasks).into_iter().zip(&tasks) {
         let local = Task {
             node: 0,
             begin: 0,
-            end: (hi - lo) as u32,
+            end: t.end - t.begin,
             ..*t
         };
         jobs.push(Mutex::new(Some((local, mine, amine))));
