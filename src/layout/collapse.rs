@@ -625,6 +625,18 @@ fn subtree_counts(bvh: &Bvh2) -> Result<Vec<u32>, CollapseError> {
     if n == 0 {
         return Ok(counts);
     }
+    if counts_in_index_order(bvh, &mut counts) {
+        return Ok(counts);
+    }
+    counts.fill(0);
+    counts_with_stack(bvh, &mut counts)?;
+    Ok(counts)
+}
+
+/// [`subtree_counts`] by a post-order walk from the root with a stack (any node order; malformed
+/// trees are errors; nodes the walk does not reach keep their count).
+fn counts_with_stack(bvh: &Bvh2, counts: &mut [u32]) -> Result<(), CollapseError> {
+    let n = bvh.nodes.len().min(counts.len());
     // (node, children done)
     let mut todo = vec![(0u32, false)];
     let mut budget = 2 * n + 1;
@@ -642,7 +654,36 @@ fn subtree_counts(bvh: &Bvh2) -> Result<Vec<u32>, CollapseError> {
             todo.push((node.left(), false));
         }
     }
-    Ok(counts)
+    Ok(())
+}
+
+/// [`subtree_counts`] in one pass from the last node to the first, where every interior node's
+/// children come after it and no node is the child of two (a forest: the walk from the root
+/// would give the same counts to every node it reaches, and never fail). `false` where that
+/// does not hold (then `counts` holds garbage).
+// PERF: the walk with a stack took about 19 ms on the 1M soup's tree (2M nodes).
+fn counts_in_index_order(bvh: &Bvh2, counts: &mut [u32]) -> bool {
+    let n = bvh.nodes.len().min(counts.len());
+    let mut seen = vec![0u64; n.div_ceil(64)];
+    let mut claim = |c: usize| {
+        let (w, b) = (c / 64, 1u64 << (c % 64));
+        let fresh = seen[w] & b == 0;
+        seen[w] |= b;
+        fresh
+    };
+    for i in (0..n).rev() {
+        let node = &bvh.nodes[i];
+        if node.is_leaf() {
+            counts[i] = node.count;
+            continue;
+        }
+        let (l, r) = (node.left() as usize, node.right() as usize);
+        if l <= i || r <= i || l >= n || r >= n || l == r || !claim(l) || !claim(r) {
+            return false;
+        }
+        counts[i] = counts[l].saturating_add(counts[r]);
+    }
+    n == bvh.nodes.len()
 }
 
 impl<L: Lane, const N: usize> BvhWide<L, N> {
@@ -1014,6 +1055,56 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The counts made in index order equal the walk's on every node the walk reaches; trees in
+    /// another order, and a node that is the child of two, take the walk.
+    #[test]
+    fn counts_in_index_order_equal_the_walk() {
+        use crate::build::{BuildParams, Builder as Bvh2Builder};
+        let tris = crate::scene::clustered_soup(3000, 6, 2);
+        for p in [
+            BuildParams::fast(),
+            BuildParams::median(),
+            BuildParams::fastest(),
+            BuildParams::ploc(),
+        ] {
+            let (bvh, _) = Bvh2Builder::new().build(&tris[..], &p).unwrap();
+            let mut walked = vec![0; bvh.nodes.len()];
+            counts_with_stack(&bvh, &mut walked).unwrap();
+            let mut ordered = vec![0; bvh.nodes.len()];
+            let in_order = counts_in_index_order(&bvh, &mut ordered);
+            assert_eq!(
+                in_order,
+                p.strategy == BuildParams::fast().strategy || p.strategy == BuildParams::median().strategy
+            );
+            if in_order {
+                assert_eq!(ordered, walked);
+            }
+            assert_eq!(subtree_counts(&bvh).unwrap(), walked);
+        }
+        // Node 1 is the child of two interior nodes: not a tree; the walk decides.
+        let b = Aabb::from_points(&[glam::Vec3::ZERO, glam::Vec3::ONE]);
+        let nodes = vec![
+            crate::traverse::Node::interior(&b, 1),
+            crate::traverse::Node::interior(&b, 3),
+            crate::traverse::Node::leaf(&b, 0, 1),
+            crate::traverse::Node::leaf(&b, 0, 1),
+            crate::traverse::Node::leaf(&b, 0, 1),
+        ];
+        let mut dag = Bvh2 {
+            nodes,
+            prim_indices: vec![0],
+        };
+        let mut c = vec![0; 5];
+        assert!(counts_in_index_order(&dag, &mut c));
+        dag.nodes[1] = crate::traverse::Node::interior(&b, 2);
+        assert!(!counts_in_index_order(&dag, &mut c), "a child claimed twice");
+        let mut walked = vec![0; 5];
+        assert_eq!(
+            counts_with_stack(&dag, &mut walked).is_ok(),
+            subtree_counts(&dag).is_ok()
+        );
     }
 
     /// `Builder::sizes` predicts exactly the wide nodes and packs the collapse makes (the arrays
