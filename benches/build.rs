@@ -941,7 +941,8 @@ fn build(c: &mut Criterion) {
 
 /// `build_threads/soup1M`: the parallel builds (`Builder::build_into_par`, warm) of the builders
 /// that have one, on 1 thread and on every core (`available_parallelism`), side by side; each
-/// parallel tree is checked to have the single-threaded tree's SAH cost. Then the BVH8 collapse
+/// parallel tree is checked to have the single-threaded tree's SAH cost. With the `embree`
+/// feature, Embree's binned SAH builder on 1 thread and on every core. Then the BVH8 collapse
 /// (`Bvh8::from_bvh2` and `from_bvh2_par`, fresh memory each time, as a one-off build).
 fn build_threads(c: &mut Criterion) {
     let tris = scene::thin_soup(1 << 20, 1);
@@ -977,6 +978,32 @@ fn build_threads(c: &mut Criterion) {
             if cores == 1 {
                 break;
             }
+        }
+    }
+    // Embree's binned SAH builder (`rtcBuildBVH`, medium) on a device with 1 thread and with
+    // every core: the triangles' boxes (computed on the calling thread, as strahl computes them
+    // inside the build) and the build, warm (one `RTCBVH` rebuilt).
+    #[cfg(feature = "embree")]
+    for threads in [1, cores] {
+        let device = peers::embree::Device::with_threads(threads);
+        let settings = peers::embree::TreeSettings {
+            quality: peers::embree::Quality::Medium,
+            max_leaf: 8,
+            traversal_cost: 1.0,
+            intersection_cost: 1.0,
+        };
+        let mut tree = peers::embree::BuiltTree::new(&device);
+        let mut boxes: Vec<Aabb> = Vec::with_capacity(tris.len());
+        g.bench_function(format!("peer/embree/medium/{threads}"), |b| {
+            b.iter(|| {
+                boxes.clear();
+                boxes.extend(black_box(&tris).iter().map(|t| Aabb::from_points(t)));
+                tree.build(&boxes, &settings);
+            })
+        });
+        drop(tree);
+        if cores == 1 {
+            break;
         }
     }
     // The cost-optimal BVH8 collapse of the `balanced()` tree, `from_bvh2` against

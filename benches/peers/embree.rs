@@ -184,13 +184,18 @@ fn context() -> RTCIntersectContext {
     }
 }
 
-/// An Embree device with one thread.
+/// An Embree device (one thread unless made with [`Device::with_threads`]).
 pub struct Device(RTCDevice);
 
 impl Device {
     /// A device restricted to one build and render thread.
     pub fn single_threaded() -> Self {
-        let cfg = CString::new("threads=1").expect("no NUL");
+        Self::with_threads(1)
+    }
+
+    /// A device with `threads` build and render threads (Embree's TBB pool).
+    pub fn with_threads(threads: usize) -> Self {
+        let cfg = CString::new(format!("threads={}", threads.max(1))).expect("no NUL");
         // SAFETY: a valid NUL-terminated config string; Embree returns null on failure (checked).
         let d = unsafe { rtcNewDevice(cfg.as_ptr()) };
         assert!(!d.is_null(), "rtcNewDevice failed");
