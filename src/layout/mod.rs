@@ -116,11 +116,10 @@ pub type Bvh8Ref<'a> = BvhWideRef<'a, f32x8, 8>;
 /// every code in range and the depth within [`MAX_WIDE_DEPTH`].
 ///
 /// With the `hugepages` feature (default) on Linux, [`from_bvh2`](Self::from_bvh2) (and its
-/// parallel form) makes node and pack arrays of 4 MiB or more in (or, for the parallel form's
-/// nodes, moves them into) memory advised for transparent
-/// huge pages, as Embree does with its trees (measured: about 1.2x on 1M-triangle scenes, whose
-/// node and leaf reads miss the TLB on 4 KiB pages). A hint only; a `clone` is an ordinary
-/// allocation.
+/// parallel form) makes node and pack arrays of 4 MiB or more in memory advised for transparent
+/// huge pages (the parallel form moves its nodes there at the end), as Embree does with its
+/// trees (measured: about 1.2x on 1M-triangle scenes, whose node and leaf reads miss the TLB on
+/// 4 KiB pages). A hint only; a `clone` is an ordinary allocation.
 #[cfg(feature = "alloc")]
 #[derive(Clone, Debug)]
 pub struct BvhWide<L, const N: usize> {
