@@ -321,12 +321,11 @@ fn split_wide(
         let mine = &bins_of_chunks[plan.first..plan.first + plan.chunks];
         let (mut lpart, mut rpart) = dst.split_at_mut(split.left_count as usize);
         let mut pieces: Vec<(&mut [PrimRef], &mut [PrimRef])> = Vec::with_capacity(plan.chunks);
-        for (ch, b) in src.chunks(plan.chunk).zip(mine) {
+        for b in mine {
             let nl = binned::left_count(b, split);
             let (l, rest) = core::mem::take(&mut lpart).split_at_mut(nl);
             lpart = rest;
             pieces.push((l, &mut []));
-            let _ = ch;
         }
         // The right pieces from the back: chunk 0's at the end.
         for ((ch, b), piece) in src.chunks(plan.chunk).zip(mine).zip(pieces.iter_mut()).rev() {
