@@ -165,6 +165,7 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
                 ..BuildParams::balanced()
             },
         ),
+        ("binned64-all+rotations (high)", BuildParams::high()),
         ("sweep (quality)", BuildParams::quality()),
         (
             "hlbvh",

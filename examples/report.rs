@@ -853,6 +853,7 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
                 ..BuildParams::balanced()
             },
         ),
+        ("binned64-all+rotations = high()", BuildParams::high()),
         ("sweep = quality()", BuildParams::quality()),
         ("hlbvh+treelets = hybrid()", BuildParams::hybrid()),
         ("hlbvh-sah = hybrid_sah()", BuildParams::hybrid_sah()),

@@ -18,7 +18,8 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
     vec![
         ("median", BuildParams::median()),
         ("binned8", BuildParams::fast()),
-        ("binned32", BuildParams::balanced()),
+        ("binned16", BuildParams::balanced()),
+        ("high", BuildParams::high()),
         (
             "binned64-leaf1",
             BuildParams {
@@ -751,4 +752,36 @@ fn hybrid_sah_is_near_the_full_sweep_and_beats_fast() {
     );
     assert!(hybrid <= sweep * 1.04, "hybrid_sah {hybrid} sweep {sweep}");
     assert!(hybrid < fast, "hybrid_sah {hybrid} fast {fast}");
+}
+
+#[test]
+fn high_beats_the_full_sweep() {
+    // Binned SAH with 64 bins and one round of rotations: 0.05% to 2.5% below the full sweep's
+    // SAH cost at 1M triangles (README); here on smaller scenes of each kind, where it was found
+    // from 1.2% below to 0.14% above (the 10k-triangle terrain), hence the margin of 0.2%. The
+    // rotations never raise the cost of the tree they start from (the same build without them).
+    let scenes = [
+        ("bunny", scene::bunny().to_soup()),
+        ("sphereflake", scene::sphereflake(2, 2).to_soup()),
+        ("terrain", scene::terrain(100, 4).to_soup()),
+        ("clustered", scene::clustered_soup(30_000, 20, 2)),
+        ("soup", scene::thin_soup(30_000, 3)),
+    ];
+    for (name, tris) in &scenes {
+        let cost = |p: BuildParams| {
+            let (bvh, stats) = Bvh2::build(&tris[..], &p).unwrap();
+            bvh.validate(&tris[..]).unwrap();
+            (bvh.sah_cost(1.0, 1.0), stats)
+        };
+        let (high, stats) = cost(BuildParams::high());
+        let (sweep, _) = cost(BuildParams::quality());
+        let (unrotated, _) = cost(BuildParams {
+            refine: Refine::None,
+            ..BuildParams::high()
+        });
+        eprintln!("{name}: high {high:.3}, binned64 {unrotated:.3}, sweep {sweep:.3}");
+        assert!(stats.restructured > 0, "{name}: no rotation applied");
+        assert!(high <= unrotated, "{name}: rotations raised {unrotated} to {high}");
+        assert!(high <= sweep * 1.002, "{name}: high {high} against sweep {sweep}");
+    }
 }

@@ -14,6 +14,7 @@ fn params() -> Vec<(&'static str, BuildParams)> {
     vec![
         ("fast", BuildParams::fast()),
         ("balanced", BuildParams::balanced()),
+        ("high", BuildParams::high()),
         ("median", BuildParams::median()),
         ("hybrid_sah", BuildParams::hybrid_sah()),
         (

@@ -3,7 +3,7 @@
 //! `cargo test --release --test build_speed -- --ignored --nocapture speed`: each builder once to
 //! warm its [`Builder`], then `STRAHL_REPS` timed builds (default 5), best and median. `STRAHL_N`
 //! sets the soup size (`scene::thin_soup(n, 1)`, default 2^20); `STRAHL_ONLY` a comma-separated
-//! list of builders (`fastest`, `lbvh63`, `fast`, `binned8all`, `balanced`, `median`, `quality`,
+//! list of builders (`fastest`, `lbvh63`, `fast`, `binned8all`, `balanced`, `high`, `median`, `quality`,
 //! `hlbvh`, `hybrid_sah`; `*_normalized`: the Morton builders on the classic per-axis grid,
 //! [`MortonCells::Normalized`]). `STRAHL_SCENE` picks the scene: `soup` (default), `terrain`
 //! (`scene::terrain(724, 1)`, 1M triangles, 5:1 flat), `sphereflake` (`scene::sphereflake(3, 3)`)
@@ -61,6 +61,7 @@ fn speed() {
             },
         ),
         ("balanced", BuildParams::balanced()),
+        ("high", BuildParams::high()),
         ("hybrid_sah", BuildParams::hybrid_sah()),
         ("fastest_normalized", normalized(BuildParams::fastest())),
         ("ploc_normalized", normalized(BuildParams::ploc())),

@@ -242,6 +242,41 @@
 //! depth 3 on (a binned top over Morton patches cannot group triangles by height as top-down
 //! splits do); clusters of 65,536 bring it to +2.3-2.9%. `balanced()` is within 2% on every scene
 //! at 2.2-2.8x `quality()`'s speed.
+//!
+//! **Past the full sweep: [`BuildParams::high`]** (2026-12-04, fifth session, Intel Xeon; the
+//! `high` member of `tests/build_speed.rs`, best of 3, the three presets one after the other):
+//! binned SAH with 64 bins on all axes, then one round of rotations ([`Refine::Rotations`]).
+//!
+//! | 1M triangles | `balanced()` ms / SAH | `high()` ms / SAH | `quality()` ms / SAH | `high()` vs `quality()` |
+//! |---|---|---|---|---|
+//! | soup | 458 / 468.72 | 625 / **465.05** | 1168 / 465.96 | -0.20%, 1.87x the speed |
+//! | terrain | 296 / 35.108 | 354 / **34.914** | 776 / 34.931 | -0.05%, 2.19x |
+//! | sphereflake | 321 / 52.015 | 392 / **49.710** | 879 / 50.979 | -2.49%, 2.24x |
+//!
+//! (The soup's run was under load: 300 ms for `balanced()` in a quiet one.) The sphereflake gains
+//! most: its greedy top-down splits leave small spheres grouped with patches of large ones,
+//! which a swap of a child with a grandchild undoes. The same probe on smaller scenes (the bunny,
+//! 100k soups, a 2-level sphereflake, a 200 x 200 terrain): 0.05% to 1.4% below the full sweep,
+//! 1.4 to 2.4 times its speed; a 100 x 100 terrain 0.14% above (`tests/build.rs`). Two rounds of
+//! rotations gain another 0.003% (terrain), 0.05% (soup) and 0.44% (sphereflake) for 5-18% more
+//! time; 16 and 32 bins with one round reach -0.17%/-0.53% on the sphereflake but +0.47%/+0.10% on the terrain.
+//!
+//! Tried the same day for `hybrid_sah()`'s "within 3% of `quality()` at 5 times its speed" on the
+//! structured scenes, none of which reaches it (SAH cost above `quality()`'s; ms from probes
+//! next to `quality()`'s 700-1050 ms):
+//! - **PLOC with a wider search** (a probe of Meister and Bittner's radius `r`, with leaves
+//!   collapsed by the SAH afterwards): `r` = 1, 2, 4, 8, 16 gave +7.6, +5.5, +5.7, +7.1, +8.5% on
+//!   the soup, +20.7 to +14.6% on the terrain, +15.6, +9.8, +7.1, +4.6, +1.3% on the sphereflake,
+//!   +7.2% or more on the bunny: agglomeration by union area alone does not follow the SAH, and on
+//!   the terrain the Morton order limits it.
+//! - **Treelets over `hybrid_sah()`'s top** (TRBVH at nodes of at least 256 or 1,024 primitives,
+//!   two rounds): sphereflake +10.7% -> +3.5-3.9% (245-335 ms), terrain +7.6% -> +5.3-5.6%;
+//!   with clusters of 65,536 the terrain reaches +2.6% but the sphereflake stays at +3.4% (360-390
+//!   ms). One to four rounds of rotations: sphereflake +6.4% to +4.5%, terrain +6.1% to +5.4%.
+//! - **Binning the longest axis only below a size** (all three above 1,024 to 65,536
+//!   references): 5-15% faster than `balanced()`, but +2.4 to +3.9% on the terrain and +3.6 to
+//!   +5.6% on the sphereflake (`balanced()`: +0.5% and +2.0%): the lower levels need the three
+//!   axes as much as the top.
 
 mod binned;
 mod builder;
