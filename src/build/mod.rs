@@ -259,7 +259,10 @@
 //! 100k soups, a 2-level sphereflake, a 200 x 200 terrain): 0.05% to 1.4% below the full sweep,
 //! 1.4 to 2.4 times its speed; a 100 x 100 terrain 0.14% above (`tests/build.rs`). Two rounds of
 //! rotations gain another 0.003% (terrain), 0.05% (soup) and 0.44% (sphereflake) for 5-18% more
-//! time; 16 and 32 bins with one round reach -0.17%/-0.53% on the sphereflake but +0.47%/+0.10% on the terrain.
+//! time; 16 and 32 bins with one round reach -0.17%/-0.53% on the sphereflake but +0.47%/+0.10%
+//! on the terrain. The rotation round walked the tree in pre-order then (62, 27 and 31 ms on the
+//! soup, terrain and sphereflake); it now runs in index order where children follow their
+//! parents, as the top-down builders lay them out (47-50, 18-20 and 21-23 ms; the same trees).
 //!
 //! Tried the same day for `hybrid_sah()`'s "within 3% of `quality()` at 5 times its speed" on the
 //! structured scenes, none of which reaches it (SAH cost above `quality()`'s; ms from probes
