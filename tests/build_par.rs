@@ -157,7 +157,8 @@ fn adversarial_scenes() {
 /// 16,384 references binned and partitioned side by side), the references are prepared in
 /// parallel (chunks of at least 32,768 primitives) and the HLBVH's Morton front end runs in
 /// parallel (chunks of at least 65,536), with invalid triangles in every chunk, a flat
-/// cluster (a node whose centroids coincide inside a wide split's round) and a low depth bound.
+/// cluster (a node whose centroids coincide inside a wide split's round) and a low depth bound;
+/// and the rotation rounds of `high()` run by subtree on the threads.
 #[test]
 fn large_scenes_split_wide() {
     let mut tris = scene::thin_soup(150_000, 21);
@@ -202,6 +203,16 @@ fn large_scenes_split_wide() {
                 min_leaf_size: 20_000,
                 max_leaf_size: 30_000,
                 ..BuildParams::fast()
+            },
+        ),
+        // Rotations by subtree side by side, the second round after the first moved records.
+        ("high", BuildParams::high()),
+        (
+            "high_depth40_2rounds",
+            BuildParams {
+                max_depth: 40,
+                refine: Refine::Rotations(2),
+                ..BuildParams::high()
             },
         ),
     ];

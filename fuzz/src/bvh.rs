@@ -81,6 +81,7 @@ pub fn builders() -> Vec<BuildParams> {
         BuildParams::median(),
         BuildParams::fast(),
         BuildParams::balanced(),
+        BuildParams::high(),
         BuildParams::quality(),
         BuildParams::hybrid(),
         BuildParams {

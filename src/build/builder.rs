@@ -137,8 +137,9 @@ impl Builder {
     /// in chunks;
     /// then the remaining subtrees side by side) and the HLBVH ([`Strategy::Hlbvh`],
     /// [`Strategy::HlbvhSah`]: with 30-bit codes, the Morton codes, the top-digit scatter and the
-    /// bucket sorts in chunks side by side; the SAH mini-trees side by side). The other
-    /// strategies, and a refinement pass, run on the calling thread. Up to 8,192 (valid) primitives
+    /// bucket sorts in chunks side by side; the SAH mini-trees side by side), and rotations
+    /// ([`Refine::Rotations`]: subtrees side by side, then the nodes above them). The other
+    /// strategies, and treelet refinement, run on the calling thread. Up to 8,192 (valid) primitives
     /// the build is single-threaded; `threads` is taken as at least 1 and at most [`MAX_THREADS`].
     /// The primitives are read from several threads, so they must be `Sync`.
     ///
@@ -201,8 +202,12 @@ impl Builder {
             restructured: 0,
         };
         if let (Refine::Rotations(r), true) = (params.refine, n > 0) {
+            #[cfg(feature = "std")]
+            let rotated = super::rotate::optimize_par(out, r, params.max_depth, threads);
+            #[cfg(not(feature = "std"))]
+            let rotated = super::rotate::optimize(out, r, params.max_depth);
             // NOTE: a tree just built is well formed; the pass cannot fail on it.
-            if let Ok(r) = super::rotate::optimize(out, r, params.max_depth) {
+            if let Ok(r) = rotated {
                 stats.max_depth = r.max_depth;
                 stats.restructured = r.rotations;
             }

@@ -309,15 +309,15 @@ impl BuildParams {
         }
     }
 
-    /// A better tree than [`quality`](Self::quality)'s in about half its time: binned SAH with 64
-    /// bins on all three axes, then one round of tree rotations ([`Refine::Rotations`]; Kensler
-    /// 2008). On the 1M-triangle soup, terrain and sphereflake its SAH cost is 0.05% to 2.5%
-    /// below the full sweep's, and on the smaller scenes measured (the bunny, 30k to 100k
-    /// triangles of each kind) at most 0.15% above it (binning and the sweep are both greedy
-    /// top-down, and the rotations then mend what greed left), at
-    /// 1.4 to 2.7 times the full sweep's speed single-threaded, 1.2 to 1.4 times slower than
-    /// [`balanced`](Self::balanced) (measured in the [module docs](super#measured)). The rotation round runs on the calling thread in
-    /// parallel builds too.
+    /// A better tree than [`quality`](Self::quality)'s in less time: binned SAH with 64 bins on
+    /// all three axes, then one round of tree rotations ([`Refine::Rotations`]; Kensler 2008).
+    /// On the 1M-triangle soup, terrain and sphereflake its SAH cost is 0.05% to 2.5% below the
+    /// full sweep's, and on the smaller scenes measured (the bunny, 10k to 100k triangles of each
+    /// kind) from 1.4% below to 0.15% above it (binning and the sweep are both greedy top-down,
+    /// and the rotations then mend what greed left), at 1.4 to 2.8 times the full sweep's speed
+    /// single-threaded and 1.2 to 1.4 times slower than [`balanced`](Self::balanced) (measured
+    /// in the [module docs](super#measured)). Parallel builds rotate subtrees side by side
+    /// (the same tree).
     ///
     /// ```
     /// use strahl::{build::{Bvh2, BuildParams, Refine}, scene};
