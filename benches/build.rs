@@ -957,6 +957,7 @@ fn build_threads(c: &mut Criterion) {
     let presets = [
         ("fast", BuildParams::fast()),
         ("balanced", BuildParams::balanced()),
+        ("high", BuildParams::high()),
         ("hybrid_sah", BuildParams::hybrid_sah()),
         ("median", BuildParams::median()),
     ];

@@ -76,6 +76,7 @@ fn run_scene(name: &str, tris: &[Triangle], list: &[usize], reps: usize) {
     let builders = [
         ("build `fast()`", BuildParams::fast()),
         ("build `balanced()`", BuildParams::balanced()),
+        ("build `high()`", BuildParams::high()),
         ("build `hybrid_sah()`", BuildParams::hybrid_sah()),
         ("build `median()`", BuildParams::median()),
     ];
