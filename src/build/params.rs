@@ -316,7 +316,7 @@ impl BuildParams {
     /// kind) from 1.4% below to 0.15% above it (binning and the sweep are both greedy top-down,
     /// and the rotations then mend what greed left), at 1.4 to 2.8 times the full sweep's speed
     /// single-threaded and 1.2 to 1.4 times slower than [`balanced`](Self::balanced) (measured
-    /// in the [module docs](super#measured)). Parallel builds rotate subtrees side by side
+    /// in the [module docs](super#measured)). Parallel builds rotate its subtrees side by side
     /// (the same tree).
     ///
     /// ```

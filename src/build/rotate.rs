@@ -13,11 +13,11 @@
 //! keep their slots' pairing (siblings stay adjacent; the swapped records carry their children
 //! with them) and the primitive-index array is not touched.
 //!
-//! With `std`, parallel builds rotate on several threads (`optimize_par`): the tree's subtrees
-//! whose nodes fill runs of slots of their own (as every builder lays them out) are rotated side
-//! by side, then the nodes above them; the same tree as one thread makes (unit test). One round
-//! on 1M-triangle trees of 64 bins, on 2 threads: about 25 ms (soup) and 11-15 ms (terrain,
-//! sphereflake) against 47-50 and 18-23 ms on one.
+//! With `std`, parallel builds rotate on several threads (`optimize_par`, the first round): the
+//! tree's subtrees whose nodes fill runs of slots of their own (as every builder lays them out)
+//! are rotated side by side, then the nodes above them; the same tree as one thread makes (unit
+//! test). One round on 1M-triangle trees of 64 bins, on 2 threads: about 25 ms (soup) and 11-15
+//! ms (terrain, sphereflake) against 47-50 and 18-23 ms on one.
 //!
 //! Never raises the SAH cost (each applied rotation lowers it by more than a relative `1e-6` of
 //! the children's areas, so rounding cannot cycle), and never makes the tree deeper than the depth
@@ -79,12 +79,13 @@ fn optimize_with(bvh: &mut Bvh2, rounds: u32, max_depth: u32, by_index: bool) ->
     Ok(stats)
 }
 
-/// [`optimize`] on up to `threads` threads (`std`): the same tree. Each round is cut into runs of
-/// slots that hold all the descendants of one node and nothing else, about eight per thread (the
-/// builders lay subtrees out that way: a node's children first, then the left child's subtree,
-/// then the right one's); the runs are checked and rotated bottom-up side by side (a rotation
-/// writes only below the node it is at), then the nodes above them on the calling thread. A round
-/// whose tree is not laid out so (and small trees) runs as in [`optimize`].
+/// [`optimize`] on up to `threads` threads (`std`): the same tree. The first round is cut into
+/// runs of slots that hold all the descendants of one node and nothing else, about eight per
+/// thread (the builders lay subtrees out that way: a node's children first, then the left
+/// child's subtree, then the right one's); the runs are checked and rotated bottom-up side by
+/// side (a rotation writes only below the node it is at), then the nodes above them on the
+/// calling thread. Later rounds, a tree not laid out so, and small trees run as in
+/// [`optimize`].
 #[cfg(feature = "std")]
 pub(crate) fn optimize_par(
     bvh: &mut Bvh2,
@@ -100,8 +101,14 @@ pub(crate) fn optimize_par(
     let mut order: Vec<u32> = Vec::new();
     let mut depth: Vec<u32> = vec![0; n];
     let mut height: Vec<u32> = vec![0; n];
-    for _ in 0..rounds.max(1) {
-        let cut = plan_runs(bvh, threads, &mut depth).filter(|(runs, _)| check_runs(bvh, runs, &mut depth, threads));
+    for round in 0..rounds.max(1) {
+        // NOTE: only the first round: a round's rotations move records (with their children) into
+        // other slots, and the layout a cut needs is gone (a probe of 2,000 rotated trees: no cut
+        // after the first round), so later rounds would pay for the plan and check in vain.
+        let cut = (round == 0)
+            .then(|| plan_runs(bvh, threads, &mut depth))
+            .flatten()
+            .filter(|(runs, _)| check_runs(bvh, runs, &mut depth, threads));
         let applied = match cut {
             Some((runs, top)) => {
                 let applied = rotate_runs(bvh, &mut height, &depth, &runs, max_depth, threads);
@@ -174,7 +181,7 @@ fn plan_runs(bvh: &Bvh2, threads: usize, depth: &mut [u32]) -> Option<(Vec<Run>,
         Some(())
     };
     open(0, &mut bounds, &mut frontier)?;
-    let limit = 256 * threads;
+    let limit = 64 * threads;
     let mut opened = 0usize;
     // Opens `x`: its children go above the cut, or (interior) to the frontier.
     let mut open_node = |x: u32,
@@ -221,7 +228,12 @@ fn plan_runs(bvh: &Bvh2, threads: usize, depth: &mut [u32]) -> Option<(Vec<Run>,
             cn.is_leaf() || (l + 2 <= cn.left() && cn.left() < end)
         })
     };
-    loop {
+    // At most 64 passes (a parallel build's breadth-first top is a few levels deep): each pass
+    // tests the whole frontier.
+    for pass in 0.. {
+        if pass == 64 {
+            return None;
+        }
         let mut misfit = Vec::new();
         for (size, x) in core::mem::take(&mut frontier).into_vec() {
             if fits(&bounds, x) {
@@ -303,7 +315,7 @@ fn check_runs(bvh: &Bvh2, runs: &[Run], depth: &mut [u32], threads: usize) -> bo
                     good = false;
                 } else if !node.is_leaf() {
                     let c = node.left() as usize;
-                    good = c > j && c + 1 < end && dep[c - first] == 0 && dep[c + 1 - first] == 0;
+                    good = c > j && c < end - 1 && dep[c - first] == 0 && dep[c + 1 - first] == 0;
                     if good {
                         (dep[c - first], dep[c + 1 - first]) = (dj + 1, dj + 1);
                     }
@@ -465,7 +477,7 @@ fn index_order(bvh: &Bvh2, order: &mut Vec<u32>, depth: &mut [u32]) -> bool {
         order.push(i as u32);
         if !node.is_leaf() {
             let l = node.left() as usize;
-            if l <= i || l + 1 >= n || depth[l] != 0 || depth[l + 1] != 0 {
+            if l <= i || l >= n - 1 || depth[l] != 0 || depth[l + 1] != 0 {
                 return false;
             }
             depth[l] = d + 1;
@@ -491,7 +503,8 @@ fn pre_order(bvh: &Bvh2, order: &mut Vec<u32>, depth: &mut [u32]) -> Result<(), 
         let node = bvh.nodes[i as usize];
         if !node.is_leaf() {
             let l = node.left();
-            if l as usize + 1 >= n || l == 0 {
+            // `>= n - 1`, not `+ 1 >= n`: no overflow where `usize` is 32 bits.
+            if l as usize >= n - 1 || l == 0 {
                 return Err(ValidateError::ChildOutOfRange { node: i, child: l });
             }
             stack.push((l + 1, d + 1));
