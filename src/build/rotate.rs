@@ -47,11 +47,18 @@ fn area(b: Box8) -> f32 {
 
 /// Runs up to `rounds` rounds of rotations over `bvh` keeping every leaf within `max_depth`.
 pub(crate) fn optimize(bvh: &mut Bvh2, rounds: u32, max_depth: u32) -> Result<RotationStats, ValidateError> {
-    optimize_with(bvh, rounds, max_depth, true)
+    optimize_with(bvh, rounds, max_depth, true, 1)
 }
 
-/// [`optimize`], with the index-order walk allowed or not (`by_index`: see [`index_order`]).
-fn optimize_with(bvh: &mut Bvh2, rounds: u32, max_depth: u32, by_index: bool) -> Result<RotationStats, ValidateError> {
+/// [`optimize`], with the index-order walk allowed or not (`by_index`: see [`index_order`]), the
+/// first round on up to `threads` threads where [`par_round`] can cut the tree.
+fn optimize_with(
+    bvh: &mut Bvh2,
+    rounds: u32,
+    max_depth: u32,
+    by_index: bool,
+    threads: usize,
+) -> Result<RotationStats, ValidateError> {
     let n = bvh.nodes.len();
     let mut stats = RotationStats::default();
     if n == 0 {
@@ -60,72 +67,16 @@ fn optimize_with(bvh: &mut Bvh2, rounds: u32, max_depth: u32, by_index: bool) ->
     let mut order: Vec<u32> = Vec::with_capacity(n);
     let mut depth: Vec<u32> = vec![0; n];
     let mut height: Vec<u32> = vec![0; n];
-    for _ in 0..rounds.max(1) {
-        if !(by_index && index_order(bvh, &mut order, &mut depth)) {
-            pre_order(bvh, &mut order, &mut depth)?;
-        }
-        let mut applied = 0u32;
-        for &i in order.iter().rev() {
-            let i = i as usize;
-            applied += u32::from(visit(&mut bvh.nodes, &mut height, 0, i, depth[i], max_depth));
-        }
-        stats.rounds += 1;
-        stats.rotations += applied;
-        if applied == 0 {
-            break;
-        }
-    }
-    stats.max_depth = height[0];
-    Ok(stats)
-}
-
-/// [`optimize`] on up to `threads` threads (`std`): the same tree. The first round is cut into
-/// runs of slots that hold all the descendants of one node and nothing else, about eight per
-/// thread (the builders lay subtrees out that way: a node's children first, then the left
-/// child's subtree, then the right one's); the runs are checked and rotated bottom-up side by
-/// side (a rotation writes only below the node it is at), then the nodes above them on the
-/// calling thread. Later rounds, a tree not laid out so, and small trees run as in
-/// [`optimize`].
-#[cfg(feature = "std")]
-pub(crate) fn optimize_par(
-    bvh: &mut Bvh2,
-    rounds: u32,
-    max_depth: u32,
-    threads: usize,
-) -> Result<RotationStats, ValidateError> {
-    let n = bvh.nodes.len();
-    if threads <= 1 || n < PAR_MIN_NODES {
-        return optimize(bvh, rounds, max_depth);
-    }
-    let mut stats = RotationStats::default();
-    let mut order: Vec<u32> = Vec::new();
-    let mut depth: Vec<u32> = vec![0; n];
-    let mut height: Vec<u32> = vec![0; n];
-    for round in 0..rounds.max(1) {
-        // NOTE: only the first round: a round's rotations move records (with their children) into
-        // other slots, and the layout a cut needs is gone (a probe of 2,000 rotated trees: no cut
-        // after the first round), so later rounds would pay for the plan and check in vain.
-        let cut = (round == 0)
-            .then(|| plan_runs(bvh, threads, &mut depth))
-            .flatten()
-            .filter(|(runs, _)| check_runs(bvh, runs, &mut depth, threads));
-        let applied = match cut {
-            Some((runs, top)) => {
-                let applied = rotate_runs(bvh, &mut height, &depth, &runs, max_depth, threads);
-                top.iter().rev().fold(applied, |acc, &i| {
-                    let i = i as usize;
-                    acc + u32::from(visit(&mut bvh.nodes, &mut height, 0, i, depth[i], max_depth))
-                })
-            }
-            None => {
-                if !index_order(bvh, &mut order, &mut depth) {
-                    pre_order(bvh, &mut order, &mut depth)?;
-                }
-                order.iter().rev().fold(0, |acc, &i| {
-                    let i = i as usize;
-                    acc + u32::from(visit(&mut bvh.nodes, &mut height, 0, i, depth[i], max_depth))
-                })
-            }
+    for r in 0..rounds.max(1) {
+        // NOTE: the first round only: a round's rotations move records (with their children)
+        // into other slots, and the layout a cut needs is gone (a probe of 2,000 rotated trees: no
+        // cut after the first round), so later rounds would pay for the plan and check in vain.
+        let par = (r == 0 && by_index)
+            .then(|| par_round(bvh, &mut depth, &mut height, max_depth, threads))
+            .flatten();
+        let applied = match par {
+            Some(applied) => applied,
+            None => one_round(bvh, &mut order, &mut depth, &mut height, by_index, max_depth)?,
         };
         stats.rounds += 1;
         stats.rotations += applied;
@@ -135,6 +86,64 @@ pub(crate) fn optimize_par(
     }
     stats.max_depth = height[0];
     Ok(stats)
+}
+
+/// One round on one thread: every node bottom-up, in reverse index order where [`index_order`]
+/// applies (and `by_index`), else in reverse pre-order. The rotations applied.
+fn one_round(
+    bvh: &mut Bvh2,
+    order: &mut Vec<u32>,
+    depth: &mut [u32],
+    height: &mut [u32],
+    by_index: bool,
+    max_depth: u32,
+) -> Result<u32, ValidateError> {
+    if !(by_index && index_order(bvh, order, depth)) {
+        pre_order(bvh, order, depth)?;
+    }
+    Ok(order.iter().rev().fold(0, |acc, &i| {
+        let i = i as usize;
+        acc + u32::from(visit(&mut bvh.nodes, height, 0, i, depth[i], max_depth))
+    }))
+}
+
+/// [`optimize`] on up to `threads` threads (`std`): the same tree (see [`par_round`]).
+#[cfg(feature = "std")]
+pub(crate) fn optimize_par(
+    bvh: &mut Bvh2,
+    rounds: u32,
+    max_depth: u32,
+    threads: usize,
+) -> Result<RotationStats, ValidateError> {
+    optimize_with(bvh, rounds, max_depth, true, threads)
+}
+
+/// One round on up to `threads` threads, or `None` (nothing done) where the tree cannot be cut:
+/// it is cut into runs of slots that hold all the descendants of one node and nothing else,
+/// about eight per thread (the builders lay subtrees out that way: a node's children first,
+/// then the left child's subtree, then the right one's); the runs are checked and rotated
+/// bottom-up side by side (a rotation writes only below the node it is at), then the nodes above
+/// them on the calling thread. Trees of fewer than [`PAR_MIN_NODES`] nodes stay on one thread.
+#[cfg(feature = "std")]
+fn par_round(bvh: &mut Bvh2, depth: &mut [u32], height: &mut [u32], max_depth: u32, threads: usize) -> Option<u32> {
+    if threads <= 1 || bvh.nodes.len() < PAR_MIN_NODES {
+        return None;
+    }
+    let (runs, top) = plan_runs(bvh, threads, depth)?;
+    if !check_runs(bvh, &runs, depth, threads) {
+        return None;
+    }
+    let applied = rotate_runs(bvh, height, depth, &runs, max_depth, threads);
+    Some(top.iter().rev().fold(applied, |acc, &i| {
+        let i = i as usize;
+        acc + u32::from(visit(&mut bvh.nodes, height, 0, i, depth[i], max_depth))
+    }))
+}
+
+/// Without `std`: every round on one thread.
+#[cfg(not(feature = "std"))]
+fn par_round(_: &mut Bvh2, _: &mut [u32], _: &mut [u32], _: u32, _: usize) -> Option<u32> {
+    None
 }
 
 /// Trees with fewer nodes are rotated on one thread.
@@ -562,8 +571,8 @@ mod tests {
                 walked_by_index |= index_order(&tree, &mut order, &mut depth);
                 for (rounds, max_depth) in [(1, 64), (3, 64), (2, 12)] {
                     let (mut a, mut b) = (tree.clone(), tree.clone());
-                    let sa = optimize_with(&mut a, rounds, max_depth, true).unwrap();
-                    let sb = optimize_with(&mut b, rounds, max_depth, false).unwrap();
+                    let sa = optimize_with(&mut a, rounds, max_depth, true, 1).unwrap();
+                    let sb = optimize_with(&mut b, rounds, max_depth, false, 1).unwrap();
                     assert_eq!(sa, sb);
                     assert_eq!(a, b);
                     assert!(sa.rotations > 0 || max_depth < 64, "{rounds} {max_depth}");
