@@ -203,12 +203,8 @@ impl Builder {
             restructured: 0,
         };
         if let (Refine::Rotations(r), true) = (params.refine, n > 0) {
-            #[cfg(feature = "std")]
-            let rotated = super::rotate::optimize_par(out, r, params.max_depth, threads);
-            #[cfg(not(feature = "std"))]
-            let rotated = super::rotate::optimize(out, r, params.max_depth);
             // NOTE: a tree just built is well formed; the pass cannot fail on it.
-            if let Ok(r) = rotated {
+            if let Ok(r) = super::rotate::optimize_par(out, r, params.max_depth, threads) {
                 stats.max_depth = r.max_depth;
                 stats.restructured = r.rotations;
             }

@@ -101,14 +101,19 @@ fn one_round(
     if !(by_index && index_order(bvh, order, depth)) {
         pre_order(bvh, order, depth)?;
     }
-    Ok(order.iter().rev().fold(0, |acc, &i| {
-        let i = i as usize;
-        acc + u32::from(visit(&mut bvh.nodes, height, 0, i, depth[i], max_depth))
-    }))
+    Ok(visit_back(bvh, height, depth, order, max_depth))
 }
 
-/// [`optimize`] on up to `threads` threads (`std`): the same tree (see [`par_round`]).
-#[cfg(feature = "std")]
+/// [`visit`]s `nodes` (slots) from last to first over the whole tree; the rotations applied.
+fn visit_back(bvh: &mut Bvh2, height: &mut [u32], depth: &[u32], nodes: &[u32], max_depth: u32) -> u32 {
+    nodes.iter().rev().fold(0, |acc, &i| {
+        let i = i as usize;
+        acc + u32::from(visit(&mut bvh.nodes, height, 0, i, depth[i], max_depth))
+    })
+}
+
+/// [`optimize`] on up to `threads` threads (with `std`; else on one): the same tree (see
+/// [`par_round`]).
 pub(crate) fn optimize_par(
     bvh: &mut Bvh2,
     rounds: u32,
@@ -134,10 +139,7 @@ fn par_round(bvh: &mut Bvh2, depth: &mut [u32], height: &mut [u32], max_depth: u
         return None;
     }
     let applied = rotate_runs(bvh, height, depth, &runs, max_depth, threads);
-    Some(top.iter().rev().fold(applied, |acc, &i| {
-        let i = i as usize;
-        acc + u32::from(visit(&mut bvh.nodes, height, 0, i, depth[i], max_depth))
-    }))
+    Some(applied + visit_back(bvh, height, depth, &top, max_depth))
 }
 
 /// Without `std`: every round on one thread.
@@ -284,55 +286,38 @@ fn plan_runs(bvh: &Bvh2, threads: usize, depth: &mut [u32]) -> Option<(Vec<Run>,
 /// each reached once (children after their parents, within the run), and writes their depths.
 #[cfg(feature = "std")]
 fn check_runs(bvh: &Bvh2, runs: &[Run], depth: &mut [u32], threads: usize) -> bool {
-    use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-    use std::sync::Mutex;
+    use core::sync::atomic::{AtomicBool, Ordering};
     let nodes = &bvh.nodes[..];
-    type Job<'a> = (Run, u32, &'a mut [u32]);
-    let mut jobs: Vec<Mutex<Option<Job<'_>>>> = Vec::with_capacity(runs.len());
     let roots: Vec<u32> = runs.iter().map(|r| depth[r[0] as usize]).collect();
-    let (mut rest, mut at) = (depth, 0usize);
-    for (&run, &d) in runs.iter().zip(&roots) {
-        let (first, end) = (run[1] as usize, run[2] as usize);
-        let (_, tail) = core::mem::take(&mut rest).split_at_mut(first - at);
-        let (mine, tail) = tail.split_at_mut(end - first);
-        rest = tail;
-        at = end;
-        jobs.push(Mutex::new(Some((run, d, mine))));
-    }
-    let (next, ok) = (AtomicUsize::new(0), AtomicBool::new(true));
-    crate::par::each(0..threads.min(runs.len()), |_| {
-        loop {
-            let k = next.fetch_add(1, Ordering::Relaxed);
-            let Some(job) = jobs.get(k) else { break };
-            let Some(([node, first, end], d, dep)) = job.lock().ok().and_then(|mut g| g.take()) else {
-                continue;
-            };
-            let (first, end) = (first as usize, end as usize);
-            // Depth 0: not reached (yet).
-            dep.fill(0);
-            let mut good = nodes[node as usize].left() as usize == first;
-            if good {
-                (dep[0], dep[1]) = (d + 1, d + 1);
-            }
-            for j in first..end {
-                if !good {
-                    break;
-                }
-                let dj = dep[j - first];
-                let node = nodes[j];
-                if dj == 0 {
-                    good = false;
-                } else if !node.is_leaf() {
-                    let c = node.left() as usize;
-                    good = c > j && c < end - 1 && dep[c - first] == 0 && dep[c + 1 - first] == 0;
-                    if good {
-                        (dep[c - first], dep[c + 1 - first]) = (dj + 1, dj + 1);
-                    }
-                }
-            }
+    let parts = crate::par::split_ranges(depth, runs.iter().map(|r| (r[1] as usize, r[2] as usize)));
+    let jobs: Vec<_> = runs.iter().zip(roots).zip(parts).collect();
+    let ok = AtomicBool::new(true);
+    crate::par::each_job(jobs, threads, |((&[node, first, end], d), dep)| {
+        let (first, end) = (first as usize, end as usize);
+        // Depth 0: not reached (yet).
+        dep.fill(0);
+        let mut good = nodes[node as usize].left() as usize == first;
+        if good {
+            (dep[0], dep[1]) = (d + 1, d + 1);
+        }
+        for j in first..end {
             if !good {
-                ok.store(false, Ordering::Relaxed);
+                break;
             }
+            let dj = dep[j - first];
+            let node = nodes[j];
+            if dj == 0 {
+                good = false;
+            } else if !node.is_leaf() {
+                let c = node.left() as usize;
+                good = c > j && c < end - 1 && dep[c - first] == 0 && dep[c + 1 - first] == 0;
+                if good {
+                    (dep[c - first], dep[c + 1 - first]) = (dj + 1, dj + 1);
+                }
+            }
+        }
+        if !good {
+            ok.store(false, Ordering::Relaxed);
         }
     });
     ok.into_inner()
@@ -342,39 +327,22 @@ fn check_runs(bvh: &Bvh2, runs: &[Run], depth: &mut [u32], threads: usize) -> bo
 /// the rotations applied.
 #[cfg(feature = "std")]
 fn rotate_runs(bvh: &mut Bvh2, height: &mut [u32], depth: &[u32], runs: &[Run], max_depth: u32, threads: usize) -> u32 {
-    use core::sync::atomic::{AtomicU32, AtomicUsize, Ordering};
-    use std::sync::Mutex;
-    type Job<'a> = (usize, &'a mut [Node], &'a mut [u32]);
-    let mut jobs: Vec<Mutex<Option<Job<'_>>>> = Vec::with_capacity(runs.len());
-    let (mut nodes, mut heights, mut at) = (&mut bvh.nodes[..], height, 0usize);
-    for &[_, first, end] in runs {
-        let (first, end) = (first as usize, end as usize);
-        let (_, rest) = core::mem::take(&mut nodes).split_at_mut(first - at);
-        let (mine, rest) = rest.split_at_mut(end - first);
-        nodes = rest;
-        let (_, hrest) = core::mem::take(&mut heights).split_at_mut(first - at);
-        let (hmine, hrest) = hrest.split_at_mut(end - first);
-        heights = hrest;
-        at = end;
-        jobs.push(Mutex::new(Some((first, mine, hmine))));
-    }
+    use core::sync::atomic::{AtomicU32, Ordering};
+    let ranges = || runs.iter().map(|r| (r[1] as usize, r[2] as usize));
+    let parts = crate::par::split_ranges(&mut bvh.nodes, ranges());
+    let mut jobs: Vec<_> = ranges()
+        .zip(parts)
+        .zip(crate::par::split_ranges(height, ranges()))
+        .collect();
     // Largest runs first.
-    let mut by_size: Vec<usize> = (0..runs.len()).collect();
-    by_size.sort_unstable_by_key(|&k| core::cmp::Reverse(runs[k][2] - runs[k][1]));
-    let (next, applied) = (AtomicUsize::new(0), AtomicU32::new(0));
-    crate::par::each(0..threads.min(runs.len()), |_| {
-        loop {
-            let k = next.fetch_add(1, Ordering::Relaxed);
-            let Some(&j) = by_size.get(k) else { break };
-            let Some((first, nodes, height)) = jobs[j].lock().ok().and_then(|mut g| g.take()) else {
-                continue;
-            };
-            let mut here = 0;
-            for i in (first..first + nodes.len()).rev() {
-                here += u32::from(visit(nodes, height, first, i, depth[i], max_depth));
-            }
-            applied.fetch_add(here, Ordering::Relaxed);
+    jobs.sort_unstable_by_key(|((r, _), _)| core::cmp::Reverse(r.1 - r.0));
+    let applied = AtomicU32::new(0);
+    crate::par::each_job(jobs, threads, |(((first, _), nodes), height)| {
+        let mut here = 0;
+        for i in (first..first + nodes.len()).rev() {
+            here += u32::from(visit(nodes, height, first, i, depth[i], max_depth));
         }
+        applied.fetch_add(here, Ordering::Relaxed);
     });
     applied.into_inner()
 }

@@ -165,22 +165,9 @@ fn task_ranges<'a>(
     alt: &'a mut [PrimRef],
     tasks: &[Task],
 ) -> Vec<(&'a mut [PrimRef], &'a mut [PrimRef])> {
-    let mut parts = Vec::with_capacity(tasks.len());
-    let (mut r, mut a) = (refs, alt);
-    let mut at = 0usize;
-    for t in tasks {
-        // Disjoint and in order: `at <= lo <= hi`, within what is left.
-        let (lo, hi) = (t.begin as usize, t.end as usize);
-        let (_, rest) = core::mem::take(&mut r).split_at_mut(lo - at);
-        let (mine, rest) = rest.split_at_mut(hi - lo);
-        r = rest;
-        let (_, arest) = core::mem::take(&mut a).split_at_mut(lo - at);
-        let (amine, arest) = arest.split_at_mut(hi - lo);
-        a = arest;
-        at = hi;
-        parts.push((mine, amine));
-    }
-    parts
+    let ranges = || tasks.iter().map(|t| (t.begin as usize, t.end as usize));
+    let r = crate::par::split_ranges(refs, ranges());
+    r.into_iter().zip(crate::par::split_ranges(alt, ranges())).collect()
 }
 
 /// A wide split's chunks of references get at least this many each.
