@@ -9,6 +9,12 @@
 //! the same triangles (the peers' BVHs with strahl's scalar triangle test; Embree its own), and
 //! their hit counts are checked against each other before timing.
 //!
+//! `bvh8_incoherent` and `bvh8_reordered` are the batch forms for incoherent rays (two walks
+//! interleaved; then also traced in the Morton order of the rays' origins, the order's
+//! computation included); `embree_*_reordered` runs Embree over the rays in that same order.
+//! `embree_robust_*` is Embree's scene built with `RTC_SCENE_FLAG_ROBUST` (robust traversal, as
+//! strahl's slab test always is; Embree's default trades that for speed).
+//!
 //! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree).
 
 #[path = "common/mod.rs"]
@@ -27,6 +33,8 @@ use strahl::intersect::{PreparedRay, moller};
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
 use strahl::traverse::Moller;
+#[cfg(feature = "embree")]
+use strahl::traverse::order::RayOrder;
 use strahl::traverse::packet::TileShape;
 use strahl::{Aabb, Ray, Vec3};
 
@@ -222,6 +230,18 @@ fn run_bvh8_occluded_incoherent(c: &Contenders, rays: &[Ray]) -> usize {
     out.iter().filter(|&&o| o).count()
 }
 
+fn run_bvh8_reordered(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut hits = vec![None; rays.len()];
+    c.bvh8.intersect_batch_reordered::<Moller>(rays, &mut hits);
+    hits.iter().filter(|h| h.is_some()).count()
+}
+
+fn run_bvh8_occluded_reordered(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut out = vec![false; rays.len()];
+    c.bvh8.occluded_batch_reordered::<Moller>(rays, &mut out);
+    out.iter().filter(|&&o| o).count()
+}
+
 fn run_bvh_crate_occluded(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter()
         .filter(|r| {
@@ -270,6 +290,8 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
     let device = peers::embree::Device::single_threaded();
     #[cfg(feature = "embree")]
     let embree = peers::embree::Scene::new(&device, &c.tris, peers::embree::Quality::Medium);
+    #[cfg(feature = "embree")]
+    let embree_robust = peers::embree::Scene::with_flags(&device, &c.tris, peers::embree::Quality::Medium, true);
 
     for (kind, rays, any_hit) in &kinds {
         let members: Vec<(&str, Run)> = if *any_hit {
@@ -278,6 +300,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh4", run_bvh4_occluded),
                 ("bvh8", run_bvh8_occluded),
                 ("bvh8_incoherent", run_bvh8_occluded_incoherent),
+                ("bvh8_reordered", run_bvh8_occluded_reordered),
                 ("packet8_bvh8", run_packet8_occluded),
                 ("bvh_crate", run_bvh_crate_occluded),
                 ("obvhs", run_obvhs_occluded),
@@ -288,6 +311,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh4", run_bvh4),
                 ("bvh8", run_bvh8),
                 ("bvh8_incoherent", run_bvh8_incoherent),
+                ("bvh8_reordered", run_bvh8_reordered),
                 ("packet8_bvh8", run_packet8),
                 ("hybrid8_bvh8", run_hybrid8),
                 ("bvh_crate", run_bvh_crate),
@@ -332,13 +356,51 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 got.abs_diff(reference) <= rays.len() / 1000 + 1,
                 "{name}/{kind}: embree hits {got}, bvh2 {reference}"
             );
+            let er = &embree_robust;
+            let got = if *any_hit {
+                rays.iter().filter(|r| er.occluded1(r)).count()
+            } else {
+                rays.iter().filter(|r| er.intersect1(r).is_some()).count()
+            };
+            assert!(
+                got.abs_diff(reference) <= rays.len() / 1000 + 1,
+                "{name}/{kind}: robust embree hits {got}, bvh2 {reference}"
+            );
+            // Embree over the rays in the order `bvh8_reordered` traces them, copied 256 at a
+            // time into a local array as strahl's ordered batches do (the order's computation
+            // timed too): what the reordering alone is worth to either tracer.
+            let reordered = |hit: &dyn Fn(&Ray) -> bool| {
+                let mut order = RayOrder::new();
+                let rays = black_box(rays);
+                let mut buf = [Ray::new(Vec3::ZERO, Vec3::ZERO); 256];
+                let mut count = 0;
+                for chunk in order.compute(rays).chunks(256) {
+                    for (b, &i) in buf.iter_mut().zip(chunk) {
+                        *b = rays[i as usize];
+                    }
+                    count += buf[..chunk.len()].iter().filter(|r| hit(r)).count();
+                }
+                count
+            };
             if *any_hit {
                 g.bench_function("embree_rtcOccluded1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| e.occluded1(r)).count())
                 });
+                g.bench_function("embree_robust_rtcOccluded1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| er.occluded1(r)).count())
+                });
+                g.bench_function("embree_rtcOccluded1_reordered", |bch| {
+                    bch.iter(|| reordered(&|r| e.occluded1(r)))
+                });
             } else {
                 g.bench_function("embree_rtcIntersect1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| e.intersect1(r).is_some()).count())
+                });
+                g.bench_function("embree_robust_rtcIntersect1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| er.intersect1(r).is_some()).count())
+                });
+                g.bench_function("embree_rtcIntersect1_reordered", |bch| {
+                    bch.iter(|| reordered(&|r| e.intersect1(r).is_some()))
                 });
             }
         }

@@ -9,7 +9,7 @@ use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::Triangle;
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
-use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_brute_force, occluded_brute_force};
+use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_brute_force, occluded_brute_force, wide};
 use strahl::{Ray, Vec3};
 
 fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
@@ -72,6 +72,29 @@ fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
             assert_eq!(h4, want_hits4[..len], "{what}: bvh4 intersect");
             assert_eq!(h8[..len], want_hits[..len], "{what}: bvh8 intersect");
             assert_eq!(h8[len], sentinel, "{what}: intersect wrote past its output");
+            // Reordered by origin (the answers land in the rays' own slots).
+            let mut o8 = vec![true; len + 1];
+            b8.occluded_batch_reordered::<T>(&rays, &mut o8[..len]);
+            assert_eq!(o8[..len], want[..len], "{what}: bvh8 occluded, reordered");
+            assert!(o8[len], "{what}: reordered occluded wrote past its output");
+            let mut h4 = vec![sentinel; len];
+            b4.intersect_batch_reordered::<T>(&rays[..len], &mut h4);
+            assert_eq!(h4, want_hits4[..len], "{what}: bvh4 intersect, reordered");
+        }
+        // Any order: reversed, with repeats and indices out of range (skipped); slots the order
+        // does not name keep their value.
+        let n = rays.len();
+        let mut order: Vec<u32> = (0..n as u32).rev().filter(|i| i % 3 != 1).collect();
+        order.extend([0, 0, n as u32, u32::MAX, 2]);
+        let what = format!("{name} / {pname} / {}: ordered", T::NAME);
+        let mut o8 = vec![true; n];
+        wide::occluded_batch_ordered::<T, _, 8>(b8.view(), &rays, &order, &mut o8);
+        let mut h8 = vec![None; n];
+        wide::intersect_batch_ordered::<T, _, 8>(b8.view(), &rays, &order, &mut h8);
+        for i in 0..n {
+            let named = i % 3 != 1;
+            assert_eq!(o8[i], if named { want[i] } else { true }, "{what}: occluded {i}");
+            assert_eq!(h8[i], if named { want_hits[i] } else { None }, "{what}: intersect {i}");
         }
     }
 }
@@ -214,7 +237,7 @@ fn packets_equal_single_rays() {
 }
 
 /// Views that break the tree's invariants (a child pointing back at the root, codes out of range,
-/// a leaf code past the packs): the single-ray functions and the incoherent batches never panic
+/// a leaf code past the packs): the single-ray functions and the incoherent and ordered batches never panic
 /// or hang, and the batches answer exactly as one call per ray (the same walk, bit for bit). With
 /// a real child replaced by the root (a cycle that also cuts the child's subtree off), the answers
 /// are still exact: a ray that enters the child's box goes round the cycle until its walk exceeds
@@ -252,6 +275,11 @@ fn malformed_views_batches_equal_single_rays() {
             let (mut hits, mut occ) = (vec![None; rays.len()], vec![false; rays.len()]);
             wide::intersect_batch_incoherent::<Watertight, _, 8>(view, &rays, &mut hits);
             wide::occluded_batch_incoherent::<Watertight, _, 8>(view, &rays, &mut occ);
+            let order: Vec<u32> = (0..rays.len() as u32).rev().collect();
+            let (mut hits_o, mut occ_o) = (vec![None; rays.len()], vec![false; rays.len()]);
+            wide::intersect_batch_ordered::<Watertight, _, 8>(view, &rays, &order, &mut hits_o);
+            wide::occluded_batch_ordered::<Watertight, _, 8>(view, &rays, &order, &mut occ_o);
+            assert_eq!((&hits_o, &occ_o), (&hits, &occ), "{what} at {at}: ordered batches");
             for (i, r) in rays.iter().enumerate() {
                 let single = wide::intersect::<Watertight, _, 8>(view, r);
                 let any = wide::occluded::<Watertight, _, 8>(view, r);

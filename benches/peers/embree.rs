@@ -22,6 +22,7 @@ const RTC_BUFFER_TYPE_VERTEX: c_uint = 1;
 const RTC_FORMAT_UINT3: c_uint = 0x5003;
 const RTC_FORMAT_FLOAT3: c_uint = 0x9003;
 const RTC_INVALID_GEOMETRY_ID: c_uint = u32::MAX;
+const RTC_SCENE_FLAG_ROBUST: c_uint = 1 << 2;
 
 /// Embree's build quality levels.
 #[derive(Clone, Copy, Debug)]
@@ -153,6 +154,7 @@ unsafe extern "C" {
     fn rtcNewScene(device: RTCDevice) -> RTCScene;
     fn rtcReleaseScene(scene: RTCScene);
     fn rtcSetSceneBuildQuality(scene: RTCScene, quality: c_uint);
+    fn rtcSetSceneFlags(scene: RTCScene, flags: c_uint);
     fn rtcCommitScene(scene: RTCScene);
     fn rtcNewGeometry(device: RTCDevice, ty: c_uint) -> RTCGeometry;
     fn rtcReleaseGeometry(geometry: RTCGeometry);
@@ -219,11 +221,22 @@ pub struct Scene<'d> {
 impl<'d> Scene<'d> {
     /// Builds Embree's BVH over `tris` (one triangle mesh) with `quality`.
     pub fn new(device: &'d Device, tris: &[[Vec3; 3]], quality: Quality) -> Self {
+        Self::with_flags(device, tris, quality, false)
+    }
+
+    /// [`new`](Self::new), in Embree's robust mode if `robust` (`RTC_SCENE_FLAG_ROBUST`: "uses
+    /// acceleration structures that allow for robust traversal, and avoids optimizations that
+    /// reduce arithmetic accuracy").
+    #[allow(dead_code)] // used by some bench targets only
+    pub fn with_flags(device: &'d Device, tris: &[[Vec3; 3]], quality: Quality, robust: bool) -> Self {
         // SAFETY: standard Embree scene setup on a live device; the buffers Embree allocates are
         // written within their sizes (3 floats per vertex, 3 u32 per triangle) before commit.
         unsafe {
             let scene = rtcNewScene(device.0);
             rtcSetSceneBuildQuality(scene, quality as c_uint);
+            if robust {
+                rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
+            }
             let geom = rtcNewGeometry(device.0, RTC_GEOMETRY_TYPE_TRIANGLE);
             rtcSetGeometryBuildQuality(geom, quality as c_uint);
             let vb = rtcSetNewGeometryBuffer(

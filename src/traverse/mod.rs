@@ -46,6 +46,8 @@
 mod brute;
 mod bvh2;
 mod node;
+#[cfg(feature = "alloc")]
+pub mod order;
 pub mod packet;
 mod stack;
 pub mod wide;
