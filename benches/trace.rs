@@ -12,7 +12,8 @@
 //! `bvh8_incoherent` and `bvh8_reordered` are the batch forms for incoherent rays (two walks
 //! interleaved; then also traced in the Morton order of the rays' origins, the order's
 //! computation included); `embree_*_reordered` runs Embree over the rays in that same order.
-//! `embree_robust_*` is Embree's scene built with `RTC_SCENE_FLAG_ROBUST` (robust traversal, as
+//! `bvh8_fast` is BVH8 with the fast slab test (`traverse::Fast<Moller>`, Embree's default form;
+//! not conservative). `embree_robust_*` is Embree's scene built with `RTC_SCENE_FLAG_ROBUST` (robust traversal, as
 //! strahl's slab test always is; Embree's default trades that for speed).
 //!
 //! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree).
@@ -32,10 +33,10 @@ use strahl::geometry::Triangle;
 use strahl::intersect::{PreparedRay, moller};
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
-use strahl::traverse::Moller;
 #[cfg(feature = "embree")]
 use strahl::traverse::order::RayOrder;
 use strahl::traverse::packet::TileShape;
+use strahl::traverse::{Fast, Moller};
 use strahl::{Aabb, Ray, Vec3};
 
 struct Contenders {
@@ -230,6 +231,16 @@ fn run_bvh8_occluded_incoherent(c: &Contenders, rays: &[Ray]) -> usize {
     out.iter().filter(|&&o| o).count()
 }
 
+fn run_bvh8_fast(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter()
+        .filter(|r| c.bvh8.intersect::<Fast<Moller>>(r).is_some())
+        .count()
+}
+
+fn run_bvh8_occluded_fast(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter().filter(|r| c.bvh8.occluded::<Fast<Moller>>(r)).count()
+}
+
 fn run_bvh8_reordered(c: &Contenders, rays: &[Ray]) -> usize {
     let mut hits = vec![None; rays.len()];
     c.bvh8.intersect_batch_reordered::<Moller>(rays, &mut hits);
@@ -299,6 +310,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh2_scalar", run_bvh2_occluded),
                 ("bvh4", run_bvh4_occluded),
                 ("bvh8", run_bvh8_occluded),
+                ("bvh8_fast", run_bvh8_occluded_fast),
                 ("bvh8_incoherent", run_bvh8_occluded_incoherent),
                 ("bvh8_reordered", run_bvh8_occluded_reordered),
                 ("packet8_bvh8", run_packet8_occluded),
@@ -310,6 +322,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh2_scalar", run_bvh2),
                 ("bvh4", run_bvh4),
                 ("bvh8", run_bvh8),
+                ("bvh8_fast", run_bvh8_fast),
                 ("bvh8_incoherent", run_bvh8_incoherent),
                 ("bvh8_reordered", run_bvh8_reordered),
                 ("packet8_bvh8", run_packet8),
@@ -322,7 +335,8 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
         let reference = members[0].1(&c, rays);
         for (m, f) in &members[1..] {
             let got = f(&c, rays);
-            let ours = (m.starts_with("bvh") && !m.contains("crate")) || m.contains("8_bvh8");
+            // The fast slab test may miss hits on boxes a ray grazes: within 0.1% like the peers.
+            let ours = ((m.starts_with("bvh") && !m.contains("crate")) || m.contains("8_bvh8")) && !m.contains("fast");
             let tol = if ours { 0 } else { rays.len() / 1000 + 1 };
             assert!(
                 got.abs_diff(reference) <= tol,

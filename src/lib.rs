@@ -44,7 +44,8 @@
 //! ## Where the tunables live
 //! | stage | knob | where |
 //! |---|---|---|
-//! | slab test | conservative far bound `far + \|far\| 2 gamma(3)` | [`intersect::aabb::FAR_SLACK`] |
+//! | slab test | conservative far bound `far + \|far\| 2 gamma(3)` (default), or the fast test by type | [`intersect::aabb::FAR_SLACK`], [`traverse::Fast`] |
+//! | incoherent batches | trace in the Morton order of the rays' origins | [`traverse::order::RayOrder`], [`layout::BvhWide::occluded_batch_reordered`] |
 //! | Morton codes | bits per axis (10 or 21), quantisation bounds | [`geometry::morton::MortonQuantizer`] |
 //! | BVH2 build | strategy, `C_T`, `C_I`, leaf sizes, bins, binned axes, Morton bits, depth bound | [`build::BuildParams`] (`fastest`, `fast`, `balanced`, `quality`, `median`) |
 //! | BVH2 traversal | stack entries, deepest tree traversed without fallback | [`traverse::STACK_SIZE`], [`traverse::MAX_DEPTH`] |

@@ -7,9 +7,10 @@ mod common;
 use common::{mixed_rays as rays, same};
 use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::Triangle;
+use strahl::intersect::PreparedRay;
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
-use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_brute_force, occluded_brute_force, wide};
+use strahl::traverse::{Fast, Moller, TriangleTest, Watertight, intersect_brute_force, occluded_brute_force, wide};
 use strahl::{Ray, Vec3};
 
 fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
@@ -23,9 +24,43 @@ fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
         let (b2, _) = Bvh2::build(tris, &params).unwrap();
         let b4 = Bvh4::from_bvh2(&b2, tris).unwrap();
         let b8 = Bvh8::from_bvh2(&b2, tris).unwrap();
+        // `Fast<T>`: every answer a real hit, never closer than brute force's; misses (of hits
+        // on boxes a ray grazes) counted and bounded.
+        let mut fast_misses = [0usize; 6];
         for ray in &rays {
             let what = format!("{name} / {pname} / {}", T::NAME);
             let brute = intersect_brute_force::<T, _>(tris, ray);
+            let fast = [
+                b2.intersect::<Fast<T>, _>(tris, ray),
+                b4.intersect::<Fast<T>>(ray),
+                b8.intersect::<Fast<T>>(ray),
+            ];
+            let prepared = PreparedRay::new_for(ray, T::WATERTIGHT);
+            for (k, f) in fast.into_iter().enumerate() {
+                match (f, brute) {
+                    (Some(h), Some(b)) => {
+                        assert!(h.t >= b.t, "{what}: fast tree {k} found {h:?} before {b:?}");
+                        let tri = tris[h.prim as usize];
+                        assert_eq!(T::intersect(&prepared, &tri, h.prim), Some(h), "{what}: fast tree {k}");
+                        fast_misses[k] += usize::from(h.t != b.t);
+                    }
+                    (None, Some(_)) => fast_misses[k] += 1,
+                    (Some(h), None) => panic!("{what}: fast tree {k} hit {h:?}, brute force nothing"),
+                    (None, None) => {}
+                }
+            }
+            let any = occluded_brute_force::<T, _>(tris, ray);
+            for (k, f) in [
+                b2.occluded::<Fast<T>, _>(tris, ray),
+                b4.occluded::<Fast<T>>(ray),
+                b8.occluded::<Fast<T>>(ray),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                assert!(!f || any, "{what}: fast tree {k} occluded, brute force not");
+                fast_misses[3 + k] += usize::from(f != any);
+            }
             let h2 = b2.intersect::<T, _>(tris, ray);
             same(h2, brute, tris, ray, &format!("{what}: bvh2 vs brute"));
             same(
@@ -46,6 +81,12 @@ fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
             assert_eq!(b4.occluded::<T>(ray), any, "{what}: bvh4 occluded {ray:?}");
             assert_eq!(b8.occluded::<T>(ray), any, "{what}: bvh8 occluded {ray:?}");
         }
+        assert!(
+            fast_misses.iter().all(|&m| m <= rays.len() / 100 + 1),
+            "{name} / {pname} / {}: fast-slab misses {fast_misses:?} of {} rays",
+            T::NAME,
+            rays.len()
+        );
         // The incoherent batches (two walks interleaved, each refilled as it ends), at every
         // short length and the whole set, with an output shorter than the rays (the rest
         // untouched): the single-ray answers (checked against brute force above), bit for bit.

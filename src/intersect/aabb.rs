@@ -150,6 +150,69 @@ pub fn intersect_aabb_lanes<L: Lane>(ray: &PreparedRay, b: &AabbLanes<L>) -> (L,
     (near, hit.bitmask())
 }
 
+/// The largest `|1 / direction|` the fast slab test uses: a zero (or tiny) direction component
+/// counts as `1e-18`, as in Embree, so that `origin * inv` stays finite
+/// ([`PreparedRay::with_fast_inv`]).
+pub const FAST_INV_MAX: f32 = 1e18;
+
+/// The fast slab test, scalar: the entry distance if `ray` hits `b`, else `None`, for a ray
+/// prepared with [`PreparedRay::with_fast_inv`] (on other rays a zero direction component can
+/// leave its axis unconstrained: never a wrong miss, but more boxes hit). Each plane's
+/// distance is one fused multiply-add, `bound * inv - origin * inv` (Embree's default form), and
+/// the box is hit when `near <= far`, without the conservative widening of
+/// [`intersect_aabb_scalar`]: the rounding of `origin * inv` can move a distance by about
+/// `|origin * inv| 2^-24`, so a ray that grazes a box, or starts on its surface, may be culled
+/// (tested: away from the boxes' surfaces it answers as the conservative test). Used by the traversals of
+/// [`Fast`](crate::traverse::Fast) tests. The same planes, reduction order and NaN rule as
+/// [`intersect_aabb_scalar`] otherwise; the multiply-add is the lanes' (fused exactly where the
+/// lane kernels are), so this equals [`intersect_aabb_fast_lanes`] lane by lane.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, intersect::{PreparedRay, aabb::intersect_aabb_fast_scalar}};
+/// let b = Aabb::new(Vec3::splat(-1.0), Vec3::ONE);
+/// let r = PreparedRay::new(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z)).with_fast_inv();
+/// assert_eq!(intersect_aabb_fast_scalar(&r, &b), Some(4.0));
+/// // Parallel to two slabs (zero direction components): inside them, hit; outside, missed.
+/// let beside = PreparedRay::new(&Ray::new(Vec3::new(2.0, 0.0, -5.0), Vec3::Z)).with_fast_inv();
+/// assert_eq!(intersect_aabb_fast_scalar(&beside, &b), None);
+/// ```
+#[inline]
+pub fn intersect_aabb_fast_scalar(ray: &PreparedRay, b: &Aabb) -> Option<f32> {
+    let fma = |x: f32, m: f32, a: f32| f32x4::splat(x).mul_add(f32x4::splat(m), f32x4::splat(a)).at(0);
+    let mut near = ray.tmin;
+    let mut far = ray.tmax;
+    for a in (0..3).rev() {
+        let (lo, hi) = if ray.inv_dir[a].is_sign_negative() {
+            (b.max[a], b.min[a])
+        } else {
+            (b.min[a], b.max[a])
+        };
+        let (inv, neg_oi) = (ray.inv_dir[a], -(ray.origin[a] * ray.inv_dir[a]));
+        near = max_l(fma(lo, inv, neg_oi), near);
+        far = min_l(fma(hi, inv, neg_oi), far);
+    }
+    if near <= far { Some(near) } else { None }
+}
+
+/// The fast slab test ([`intersect_aabb_fast_scalar`]), one ray against `N` boxes: entry
+/// distances and the bit mask of lanes hit.
+#[inline(always)]
+pub fn intersect_aabb_fast_lanes<L: Lane>(ray: &PreparedRay, b: &AabbLanes<L>) -> (L, u32) {
+    let mut near = L::splat(ray.tmin);
+    let mut far = L::splat(ray.tmax);
+    for a in (0..3).rev() {
+        let (lo, hi) = if ray.inv_dir[a].is_sign_negative() {
+            (b.max[a], b.min[a])
+        } else {
+            (b.min[a], b.max[a])
+        };
+        let (m, c) = (L::splat(ray.inv_dir[a]), L::splat(-(ray.origin[a] * ray.inv_dir[a])));
+        near = lo.mul_add(m, c).max_l(near);
+        far = hi.mul_add(m, c).min_l(far);
+    }
+    (near, near.le(far).bitmask())
+}
+
 /// One ray against 4 boxes. Bit `i` of the mask is set where lane `i` is hit; the entry distances of
 /// missed lanes are meaningless.
 ///
@@ -350,5 +413,57 @@ mod tests {
             assert_eq!(intersect_aabb_x4(&r, &AabbX4::from_boxes(&[b; 4])).1, 0xf, "{name}");
             assert_eq!(intersect_aabb_x8(&r, &AabbX8::from_boxes(&[b; 8])).1, 0xff, "{name}");
         }
+    }
+
+    /// The fast slab test: the scalar form equals both lane widths bit for bit (masks and entry
+    /// distances), on random rays and boxes with zero direction components and origins on slab
+    /// planes; and away from the boxes' surfaces it answers as the conservative test.
+    #[test]
+    fn fast_slabs_equal_in_every_width() {
+        let mut rng = crate::scene::Rng::new(11);
+        let mut agree = 0usize;
+        for i in 0..20_000 {
+            let mut d = rng.unit_vector();
+            if i % 3 == 0 {
+                d[(i / 3) % 3] = if i % 2 == 0 { 0.0 } else { -0.0 };
+            }
+            let mut o = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 4.0 - 2.0;
+            let boxes: [Aabb; 8] = core::array::from_fn(|_| {
+                let a = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 2.0 - 1.0;
+                let b = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 2.0 - 1.0;
+                Aabb::new(a.min(b), a.max(b))
+            });
+            if i % 5 == 0 {
+                o.x = boxes[0].min.x; // on a slab plane
+            }
+            let r = PreparedRay::new(&Ray::new(o, d)).with_fast_inv();
+            let exact = PreparedRay::new(&Ray::new(o, d));
+            let (n4, m4) = intersect_aabb_fast_lanes(&r, &AabbX4::from_boxes(&boxes[..4]));
+            let (n8, m8) = intersect_aabb_fast_lanes(&r, &AabbX8::from_boxes(&boxes));
+            for (k, b) in boxes.iter().enumerate() {
+                let s = intersect_aabb_fast_scalar(&r, b);
+                assert_eq!(s.is_some(), m8 >> k & 1 != 0, "ray {i} box {k}");
+                if let Some(t) = s {
+                    assert_eq!(t.to_bits(), n8.lane(k).to_bits(), "ray {i} box {k}");
+                }
+                if k < 4 {
+                    assert_eq!(s.is_some(), m4 >> k & 1 != 0, "ray {i} box {k}");
+                    if let Some(t) = s {
+                        assert_eq!(t.to_bits(), n4.lane(k).to_bits(), "ray {i} box {k}");
+                    }
+                }
+                // Away from the surfaces (every box but the one whose plane holds the origin),
+                // as the conservative test.
+                if i % 5 != 0 || k != 0 {
+                    assert_eq!(
+                        s.is_some(),
+                        intersect_aabb_scalar(&exact, b).is_some(),
+                        "ray {i} box {k}"
+                    );
+                    agree += 1;
+                }
+            }
+        }
+        assert_eq!(agree, 20_000 * 8 - 4_000);
     }
 }

@@ -87,6 +87,23 @@ pub struct PreparedRay {
 }
 
 impl PreparedRay {
+    /// For the fast slab test ([`Fast`](crate::traverse::Fast) traversals,
+    /// [`aabb::intersect_aabb_fast_scalar`]): `inv_dir` with its magnitudes clamped to
+    /// [`aabb::FAST_INV_MAX`] (signs kept), so that `origin * inv_dir` stays finite for zero
+    /// direction components. The conservative slab test expects the exact reciprocals.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::PreparedRay};
+    /// let r = PreparedRay::new(&Ray::new(Vec3::ONE, Vec3::new(2.0, -0.0, 0.0))).with_fast_inv();
+    /// assert_eq!(r.inv_dir, Vec3::new(0.5, -1e18, 1e18));
+    /// ```
+    #[inline(always)]
+    pub fn with_fast_inv(mut self) -> Self {
+        let inv = Vec3A::from(self.inv_dir);
+        self.inv_dir = inv.abs().min(Vec3A::splat(aabb::FAST_INV_MAX)).copysign(inv).into();
+        self
+    }
+
     /// Prepares `ray`. An invalid ray becomes one that hits nothing.
     #[inline]
     pub fn new(ray: &Ray) -> Self {

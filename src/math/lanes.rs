@@ -53,6 +53,13 @@ pub trait Lane:
     fn xor_sign(self, sign: Self) -> Self;
     /// Clears the sign bits.
     fn abs(self) -> Self;
+    /// `self * m + a`: fused (one rounding) where the target has FMA instructions (x86 with the
+    /// `fma` feature, AArch64), else a multiply and an add, as `wide` does it; the same in every
+    /// width on one target.
+    #[inline(always)]
+    fn mul_add(self, m: Self, a: Self) -> Self {
+        self * m + a
+    }
     /// Lane `i` (`i < N`; taken modulo `N`) read in place, without moving the vector.
     fn at(&self, i: usize) -> f32;
     /// A lane mask from bits: all bits set in lane `i` where bit `i` of `bits` is set, zero
@@ -197,6 +204,10 @@ macro_rules! impl_lane {
             #[inline(always)]
             fn abs(self) -> Self {
                 <$t>::abs(self)
+            }
+            #[inline(always)]
+            fn mul_add(self, m: Self, a: Self) -> Self {
+                <$t>::mul_add(self, m, a)
             }
             #[inline(always)]
             fn at(&self, i: usize) -> f32 {

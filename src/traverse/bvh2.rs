@@ -1,10 +1,8 @@
 //! Scalar closest-hit and any-hit traversal of a binary BVH (see the [module docs](super)).
 
-use super::{Bvh2Ref, Node, STACK_SIZE, TriangleTest};
+use super::{Bvh2Ref, Node, STACK_SIZE, TriangleTest, beyond, node_scalar, prepare};
 use crate::geometry::{Hit, Ray, Triangles};
-use crate::intersect::aabb::FAR_SLACK;
-use crate::intersect::{PreparedRay, intersect_aabb_scalar};
-use crate::math::abs;
+use crate::intersect::PreparedRay;
 
 /// Closest hit of `ray` in the tree `bvh` over `tris` (scalar reference).
 ///
@@ -49,9 +47,9 @@ pub fn occluded_scalar<T: TriangleTest, P: Triangles + ?Sized>(bvh: Bvh2Ref<'_>,
 #[inline(always)]
 fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_>, tris: &P, ray: &Ray) -> Option<Hit> {
     let nodes = bvh.nodes;
-    let mut r = PreparedRay::new_for(ray, T::WATERTIGHT);
+    let mut r = prepare::<T>(ray);
     let root = nodes.first()?;
-    intersect_aabb_scalar(&r, &root.aabb())?;
+    node_scalar::<T>(&r, &root.aabb())?;
 
     // (node, entry distance) of the far children still to visit.
     let mut stack = [(0u32, 0.0f32); STACK_SIZE];
@@ -83,8 +81,8 @@ fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_
         } else {
             let (li, ri) = (node.left(), node.right());
             let (ln, rn) = (nodes.get(li as usize), nodes.get(ri as usize));
-            let tl = ln.and_then(|n| intersect_aabb_scalar(&r, &n.aabb()));
-            let tr = rn.and_then(|n| intersect_aabb_scalar(&r, &n.aabb()));
+            let tl = ln.and_then(|n| node_scalar::<T>(&r, &n.aabb()));
+            let tr = rn.and_then(|n| node_scalar::<T>(&r, &n.aabb()));
             match (ln, tl, rn, tr) {
                 (Some(ln), Some(tl), Some(rn), Some(tr)) => {
                     // Both hit: descend into the nearer (ties: left), push the farther.
@@ -117,7 +115,7 @@ fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_
             }
             sp -= 1;
             let (n, near) = stack[sp];
-            if near > r.tmax + abs(r.tmax) * FAR_SLACK {
+            if beyond::<T>(near, r.tmax) {
                 continue;
             }
             if let Some(n) = nodes.get(n as usize) {

@@ -6,23 +6,16 @@
 //! distance lies beyond the current closest hit are skipped (with the slab test's own
 //! conservative slack, so nothing a hit could lie in is culled).
 
-use super::TriangleTest;
+use super::{TriangleTest, beyond, node_lanes, prepare};
 use crate::geometry::{Hit, Ray};
 use crate::intersect::PreparedRay;
-use crate::intersect::aabb::{FAR_SLACK, intersect_aabb_lanes};
 
 use super::stack::Stack;
 use crate::layout::{BvhWideRef, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs};
-use crate::math::{Lane, abs};
+use crate::math::Lane;
 
 /// Stack entries: enough for `MAX_WIDE_DEPTH` levels of 8-wide nodes.
 const STACK: usize = MAX_WIDE_DEPTH as usize * 7 + 1;
-
-#[inline(always)]
-fn beyond(tnear: f32, tmax: f32) -> bool {
-    // The slab test's acceptance, `near <= far + |far| FAR_SLACK`, negated.
-    tnear > tmax + abs(tmax) * FAR_SLACK
-}
 
 /// Asks the cache for child `code` (an interior node, or the first 384 bytes of a leaf's packs)
 /// ahead of its visit: children pushed now are popped after their siblings' subtrees, by when the
@@ -68,7 +61,7 @@ pub(crate) fn prefetch<L, const N: usize>(bvh: BvhWideRef<'_, L, N>, code: u32) 
 /// ```
 #[inline]
 pub fn intersect<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, ray: &Ray) -> Option<Hit> {
-    let mut r = PreparedRay::new_for(ray, T::WATERTIGHT);
+    let mut r = prepare::<T>(ray);
     if r.is_empty() || bvh.nodes.is_empty() {
         return None;
     }
@@ -142,7 +135,7 @@ impl<const S: usize> ClosestWalk<S> {
             }
             self.budget -= 1;
             if let Some(node) = bvh.nodes.get(cur as usize) {
-                let (near, mut mask) = intersect_aabb_lanes(r, &node.bounds);
+                let (near, mut mask) = node_lanes::<T, L>(r, &node.bounds);
                 if mask != 0 {
                     if mask & (mask - 1) == 0 {
                         // One child: descend without touching the stack.
@@ -182,7 +175,7 @@ impl<const S: usize> ClosestWalk<S> {
                     self.done = true;
                     return;
                 }
-                Some((code, near)) if !beyond(near, r.tmax) => {
+                Some((code, near)) if !beyond::<T>(near, r.tmax) => {
                     self.cur = code;
                     return;
                 }
@@ -222,7 +215,7 @@ pub fn intersect_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
     hits: &mut [Option<Hit>],
 ) {
     let start = |i: usize| {
-        let r = PreparedRay::new_for(&rays[i], T::WATERTIGHT);
+        let r = prepare::<T>(&rays[i]);
         let mut w = ClosestWalk::<STACK>::new(bvh, 0);
         // An empty ray's walk starts done, with no hit (as `intersect`).
         w.done = r.is_empty() || bvh.nodes.is_empty();
@@ -277,7 +270,7 @@ pub fn intersect_batch_ordered<T: TriangleTest, L: Lane, const N: usize>(
 /// first hit found.
 #[inline]
 pub fn occluded<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, ray: &Ray) -> bool {
-    let r = PreparedRay::new_for(ray, T::WATERTIGHT);
+    let r = prepare::<T>(ray);
     occluded_prepared::<T, L, N>(bvh, &r)
 }
 
@@ -343,7 +336,7 @@ impl<const S: usize> AnyHitWalk<S> {
             }
             self.budget -= 1;
             if let Some(node) = bvh.nodes.get(cur as usize) {
-                let (_, mut mask) = intersect_aabb_lanes(r, &node.bounds);
+                let (_, mut mask) = node_lanes::<T, L>(r, &node.bounds);
                 if mask != 0 {
                     if mask & (mask - 1) == 0 {
                         self.cur = node.child[mask.trailing_zeros() as usize];
@@ -410,7 +403,7 @@ pub fn occluded_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
     out: &mut [bool],
 ) {
     let start = |i: usize| {
-        let r = PreparedRay::new_for(&rays[i], T::WATERTIGHT);
+        let r = prepare::<T>(&rays[i]);
         let w = AnyHitWalk::<STACK>::new(bvh, &r);
         (r, w)
     };
@@ -449,7 +442,7 @@ pub fn occluded_batch_ordered<T: TriangleTest, L: Lane, const N: usize>(
     out: &mut [bool],
 ) {
     let start = |ray: &Ray| {
-        let r = PreparedRay::new_for(ray, T::WATERTIGHT);
+        let r = prepare::<T>(ray);
         let w = AnyHitWalk::<STACK>::new(bvh, &r);
         (r, w)
     };
