@@ -218,6 +218,16 @@ fn batch_and_parallel_batch_agree_with_single_rays() {
     b8.intersect_batch_par::<Watertight>(&rays, &mut hits, 3);
     let mut occ = vec![false; rays.len()];
     b8.occluded_batch_par::<Watertight>(&rays, &mut occ, 2);
+    // Reordered by origin on 1-4 threads, outputs longer and shorter than the rays.
+    for threads in 1..=4 {
+        let mut hits_r = vec![None; rays.len() + 1];
+        b8.intersect_batch_reordered_par::<Watertight>(&rays, &mut hits_r, threads);
+        let mut occ_r = vec![true; rays.len() - 7];
+        b8.occluded_batch_reordered_par::<Watertight>(&rays, &mut occ_r, threads);
+        assert_eq!(hits_r[..rays.len()], hits[..], "{threads} threads");
+        assert_eq!(hits_r[rays.len()], None, "{threads} threads");
+        assert_eq!(occ_r[..], occ[..rays.len() - 7], "{threads} threads");
+    }
     for (i, r) in rays.iter().enumerate() {
         assert_eq!(hits[i], b8.intersect::<Watertight>(r));
         assert_eq!(occ[i], b8.occluded::<Watertight>(r));

@@ -673,23 +673,81 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     {
         par_chunks(rays, occluded, threads, |r, o| self.occluded_batch::<T>(r, o));
     }
+
+    /// [`intersect_batch_reordered`](Self::intersect_batch_reordered) on `threads` threads
+    /// (`std`): the order computed once, chunks of 1024 rays in that order traced side by side,
+    /// the hits those of one call per ray.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let rays: Vec<Ray> = (0..3000)
+    ///     .map(|i| Ray::new(Vec3::new((i % 7) as f32 * 0.1, (i % 11) as f32 * 0.1, -3.0), Vec3::Z))
+    ///     .collect();
+    /// let mut hits = vec![None; rays.len()];
+    /// b8.intersect_batch_reordered_par::<Moller>(&rays, &mut hits, 2);
+    /// assert!(rays.iter().zip(&hits).all(|(r, h)| *h == b8.intersect::<Moller>(r)));
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn intersect_batch_reordered_par<T: TriangleTest>(&self, rays: &[Ray], hits: &mut [Option<Hit>], threads: usize)
+    where
+        L: Sync,
+    {
+        reordered_par(rays, hits, threads, |r, h| self.intersect_batch::<T>(r, h));
+    }
+
+    /// [`occluded_batch_reordered`](Self::occluded_batch_reordered) on `threads` threads (`std`),
+    /// as [`intersect_batch_reordered_par`](Self::intersect_batch_reordered_par); each chunk's
+    /// walks two at a time, interleaved.
+    #[cfg(feature = "std")]
+    pub fn occluded_batch_reordered_par<T: TriangleTest>(&self, rays: &[Ray], occluded: &mut [bool], threads: usize)
+    where
+        L: Sync,
+    {
+        reordered_par(rays, occluded, threads, |r, o| {
+            self.occluded_batch_incoherent::<T>(r, o)
+        });
+    }
 }
 
-/// Runs `f` over matching chunks of `rays` and `out` on `threads` threads.
+/// Runs `f` over matching chunks of `input` and `out` (1024 items each) on `threads` threads.
 #[cfg(feature = "std")]
-fn par_chunks<O: Send, F: Fn(&[Ray], &mut [O]) + Sync>(rays: &[Ray], out: &mut [O], threads: usize, f: F) {
-    use std::sync::Mutex;
+fn par_chunks<I: Sync, O: Send, F: Fn(&[I], &mut [O]) + Sync>(input: &[I], out: &mut [O], threads: usize, f: F) {
     const CHUNK: usize = 1024;
-    let n = rays.len().min(out.len());
-    let work: Mutex<core::iter::Zip<core::slice::Chunks<'_, Ray>, core::slice::ChunksMut<'_, O>>> =
-        Mutex::new(rays[..n].chunks(CHUNK).zip(out[..n].chunks_mut(CHUNK)));
-    crate::par::each(0..threads.clamp(1, crate::build::MAX_THREADS), |_| {
-        loop {
-            let next = work.lock().map(|mut w| w.next()).unwrap_or(None);
-            match next {
-                Some((r, o)) => f(r, o),
-                None => break,
-            }
-        }
+    let n = input.len().min(out.len());
+    let jobs: alloc::vec::Vec<_> = input[..n].chunks(CHUNK).zip(out[..n].chunks_mut(CHUNK)).collect();
+    crate::par::each_job(jobs, threads.clamp(1, crate::build::MAX_THREADS), |(i, o)| f(i, o));
+}
+
+/// A reordered batch on `threads` threads: the order of the rays' origins
+/// ([`RayOrder`](super::order::RayOrder)), its chunks traced side by side into answers in that
+/// sequence (`trace(rays, answers)` over each chunk's rays, copied together [`GATHER`] at a time),
+/// then each answer moved to its ray's slot in `out`.
+#[cfg(feature = "std")]
+fn reordered_par<O: Copy + Default + Send>(
+    rays: &[Ray],
+    out: &mut [O],
+    threads: usize,
+    trace: impl Fn(&[Ray], &mut [O]) + Sync,
+) {
+    let n = rays.len().min(out.len()).min(u32::MAX as usize);
+    let mut order = super::order::RayOrder::new();
+    let order = order.compute(&rays[..n]);
+    let mut seq = alloc::vec![O::default(); n];
+    par_chunks(order, &mut seq, threads, |ord, answers| {
+        let mut at = 0;
+        gather_ordered(rays, ord, n, |chunk, _| {
+            trace(chunk, &mut answers[at..at + chunk.len()]);
+            at += chunk.len();
+        });
     });
+    for (&i, a) in order.iter().zip(seq) {
+        out[i as usize] = a;
+    }
+    if out.len().min(rays.len()) > n {
+        let m = out.len().min(rays.len());
+        trace(&rays[n..m], &mut out[n..m]);
+    }
 }
