@@ -383,18 +383,21 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
             // Embree over the rays in the order `bvh8_reordered` traces them, copied 256 at a
             // time into a local array as strahl's ordered batches do (the order's computation
             // timed too): what the reordering alone is worth to either tracer.
+            // Each answer is written to its ray's slot, as strahl's batches do.
             let reordered = |hit: &dyn Fn(&Ray) -> bool| {
                 let mut order = RayOrder::new();
                 let rays = black_box(rays);
+                let mut out = vec![false; rays.len()];
                 let mut buf = [Ray::new(Vec3::ZERO, Vec3::ZERO); 256];
-                let mut count = 0;
                 for chunk in order.compute(rays).chunks(256) {
                     for (b, &i) in buf.iter_mut().zip(chunk) {
                         *b = rays[i as usize];
                     }
-                    count += buf[..chunk.len()].iter().filter(|r| hit(r)).count();
+                    for (r, &i) in buf.iter().zip(chunk) {
+                        out[i as usize] = hit(r);
+                    }
                 }
-                count
+                out.iter().filter(|&&o| o).count()
             };
             if *any_hit {
                 g.bench_function("embree_rtcOccluded1", |bch| {

@@ -6,7 +6,7 @@ mod common;
 
 use common::{mixed_rays as rays, same};
 use strahl::build::{BuildParams, Bvh2};
-use strahl::geometry::Triangle;
+use strahl::geometry::{Hit, Triangle};
 use strahl::intersect::PreparedRay;
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
@@ -130,12 +130,23 @@ fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
         let what = format!("{name} / {pname} / {}: ordered", T::NAME);
         let mut o8 = vec![true; n];
         wide::occluded_batch_ordered::<T, _, 8>(b8.view(), &rays, &order, &mut o8);
-        let mut h8 = vec![None; n];
+        // A hit as the sentinel: writing a miss into a slot not named would show.
+        let sentinel = want_hits.iter().flatten().next().copied().or(Some(Hit {
+            t: 1.0,
+            u: 0.0,
+            v: 0.0,
+            prim: 0,
+        }));
+        let mut h8 = vec![sentinel; n];
         wide::intersect_batch_ordered::<T, _, 8>(b8.view(), &rays, &order, &mut h8);
         for i in 0..n {
             let named = i % 3 != 1;
             assert_eq!(o8[i], if named { want[i] } else { true }, "{what}: occluded {i}");
-            assert_eq!(h8[i], if named { want_hits[i] } else { None }, "{what}: intersect {i}");
+            assert_eq!(
+                h8[i],
+                if named { want_hits[i] } else { sentinel },
+                "{what}: intersect {i}"
+            );
         }
     }
 }
@@ -220,12 +231,14 @@ fn batch_and_parallel_batch_agree_with_single_rays() {
     b8.occluded_batch_par::<Watertight>(&rays, &mut occ, 2);
     // Reordered by origin on 1-4 threads, outputs longer and shorter than the rays.
     for threads in 1..=4 {
-        let mut hits_r = vec![None; rays.len() + 1];
+        let sentinel = hits.iter().flatten().next().copied();
+        assert!(sentinel.is_some());
+        let mut hits_r = vec![sentinel; rays.len() + 1];
         b8.intersect_batch_reordered_par::<Watertight>(&rays, &mut hits_r, threads);
         let mut occ_r = vec![true; rays.len() - 7];
         b8.occluded_batch_reordered_par::<Watertight>(&rays, &mut occ_r, threads);
         assert_eq!(hits_r[..rays.len()], hits[..], "{threads} threads");
-        assert_eq!(hits_r[rays.len()], None, "{threads} threads");
+        assert_eq!(hits_r[rays.len()], sentinel, "{threads} threads: wrote past the rays");
         assert_eq!(occ_r[..], occ[..rays.len() - 7], "{threads} threads");
     }
     for (i, r) in rays.iter().enumerate() {
@@ -350,4 +363,77 @@ fn malformed_views_batches_equal_single_rays() {
         }
     }
     assert_eq!(cycles_checked, 4 * rays.len());
+}
+
+/// `Fast<T>` answers the same for a direction and the same direction scaled by 1e-5 to 1e30
+/// (directions of ordinary length: its reciprocals are clamped to 1e18 as Embree's are), and the
+/// packet traversals keep the conservative test under `Fast<T>`: every lane equals `T`'s
+/// single-ray answer.
+#[test]
+fn fast_slabs_are_scale_free_and_packets_stay_conservative() {
+    use strahl::traverse::packet;
+    let tris = scene::icosphere(3).to_soup();
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    let base = rays(&tris, 400, 21);
+    let mut hits = 0;
+    for r in &base {
+        let want = b8.intersect::<Fast<Watertight>>(r);
+        let want2 = b2.intersect::<Fast<Watertight>, _>(&tris[..], r);
+        hits += usize::from(want.is_some());
+        for s in [1e-5f32, 1e5, 1e30] {
+            let scaled = Ray::with_range(r.origin, r.direction * s, r.tmin / s, r.tmax / s);
+            if !scaled.is_valid() || !(r.direction * s).is_finite() {
+                continue;
+            }
+            let got = b8.intersect::<Fast<Watertight>>(&scaled);
+            assert_eq!(got.is_some(), want.is_some(), "scale {s}: {r:?}");
+            assert_eq!(got.map(|h| h.prim), want.map(|h| h.prim), "scale {s}: {r:?}");
+            let got2 = b2.intersect::<Fast<Watertight>, _>(&tris[..], &scaled);
+            assert_eq!(got2.map(|h| h.prim), want2.map(|h| h.prim), "bvh2, scale {s}: {r:?}");
+        }
+    }
+    assert!(hits > 100, "{hits}");
+    // Rays aimed at the mesh's vertices meet boxes exactly on their faces, where the two box
+    // tests differ (a few single rays do); the packets answer as `T` on every one.
+    let mut m = scene::icosphere(3);
+    for p in &mut m.positions {
+        *p = *p * 3.7 + Vec3::new(0.31, -1.7, 2.1);
+    }
+    let aimed = scene::aimed_rays(&m, scene::Aim::Vertices, 8, 3.0, 2);
+    let tris = m.to_soup();
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    let differ = aimed
+        .iter()
+        .filter(|r| b8.intersect::<Fast<Watertight>>(r) != b8.intersect::<Watertight>(r))
+        .count();
+    assert!(differ > 0, "no ray tells the box tests apart");
+    for chunk in aimed.chunks(8) {
+        let mut fast = [None; 8];
+        let mut plain = [None; 8];
+        packet::intersect8::<Fast<Watertight>, _, 8>(b8.view(), chunk, &mut fast, packet::DEFAULT_SWITCH);
+        packet::intersect8::<Watertight, _, 8>(b8.view(), chunk, &mut plain, packet::DEFAULT_SWITCH);
+        assert_eq!(fast, plain);
+        let mut occ_fast = [false; 8];
+        let mut occ_plain = [false; 8];
+        packet::occluded8::<Fast<Watertight>, _, 8>(b8.view(), chunk, &mut occ_fast);
+        packet::occluded8::<Watertight, _, 8>(b8.view(), chunk, &mut occ_plain);
+        assert_eq!(occ_fast, occ_plain);
+        let mut b2_fast = [None; 8];
+        packet::intersect_packet_bvh2::<Fast<Watertight>, _, strahl::math::f32x8, 8>(
+            b2.view(),
+            &tris[..],
+            chunk,
+            &mut b2_fast,
+        );
+        let mut b2_plain = [None; 8];
+        packet::intersect_packet_bvh2::<Watertight, _, strahl::math::f32x8, 8>(
+            b2.view(),
+            &tris[..],
+            chunk,
+            &mut b2_plain,
+        );
+        assert_eq!(b2_fast, b2_plain);
+    }
 }

@@ -129,9 +129,10 @@ fn agrees(tris: &[Triangle], ray: &Ray, got: Option<Hit>, want: Option<Hit>, wha
         (Some(g), Some(w)) if g.t != w.t && near_tie(ray, g, w) => {
             // A near tie: the tree's hit is real and within rounding of brute force's. A triangle
             // hit whose computed `t` lies a rounding error before its own box's entry distance is
-            // culled once a hit closer than that entry is known (found by this target: a ray
-            // starting on an edge two triangles share, `tmin = -inf`, their hits 4e-9 apart at
-            // `t` = 0 on coordinates of size 8).
+            // culled once a hit closer than that entry is known (found by this target, seed
+            // `near-tie-edge-origin`: a ray starting on an edge two triangles share,
+            // `tmin = -inf`, their hits 4e-9 apart at `t` = 0 on coordinates of size 8). A known
+            // limit of the traversals' exactness, documented at `TriangleTest::CONSERVATIVE_BOXES`.
             let r = PreparedRay::new(ray);
             let alone = tris
                 .get(g.prim as usize)

@@ -416,7 +416,7 @@ mod tests {
     #[test]
     fn fast_slabs_equal_in_every_width() {
         let mut rng = crate::scene::Rng::new(11);
-        let mut agree = 0usize;
+        let mut hits = 0usize;
         for i in 0..20_000 {
             let mut d = rng.unit_vector();
             if i % 3 == 0 {
@@ -455,10 +455,11 @@ mod tests {
                         intersect_aabb_scalar(&exact, b).is_some(),
                         "ray {i} box {k}"
                     );
-                    agree += 1;
+                    hits += usize::from(s.is_some());
                 }
             }
         }
-        assert_eq!(agree, 20_000 * 8 - 4_000);
+        // Both answers well represented among the boxes compared.
+        assert!((1_000..150_000).contains(&hits), "{hits} of 156,000 boxes hit");
     }
 }

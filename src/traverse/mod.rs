@@ -87,8 +87,11 @@ pub trait TriangleTest {
     /// skip computing them otherwise ([`PreparedRay::new_for`]). Defaults to `true`.
     const WATERTIGHT: bool = true;
     /// `true` (the default): the single-ray traversals test boxes with the conservative slab
-    /// test ([`intersect_aabb_scalar`](crate::intersect::intersect_aabb_scalar)), and their
-    /// answers equal brute force's. `false` for [`Fast`]: the fast one
+    /// test ([`intersect_aabb_scalar`](crate::intersect::intersect_aabb_scalar)), which never
+    /// culls a box a ray touches. (Closest hits then equal brute force's except where two hits
+    /// lie within the triangle test's rounding of each other at a box's entry distance, when the
+    /// later-found one can be culled: found by fuzzing, seed `fuzz/seeds/bvh/near-tie-edge-origin`.)
+    /// `false` for [`Fast`]: the fast one
     /// ([`intersect_aabb_fast_scalar`](crate::intersect::aabb::intersect_aabb_fast_scalar)).
     const CONSERVATIVE_BOXES: bool = true;
     /// The hit of `ray` with `tri` (reported with `prim`), if any, within `[tmin, tmax)`.
@@ -129,6 +132,11 @@ pub struct Moller;
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Watertight;
 
+/// A triangle test `T` with the single-ray traversals' box test chosen by `CONSERVATIVE`: the
+/// conservative slab test (`true`, what `T` alone gives) or the fast one (`false`: [`Fast`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct WithBoxes<T, const CONSERVATIVE: bool>(core::marker::PhantomData<T>);
+
 /// The triangle test `T` with the **fast slab test** in the single-ray traversals (scalar BVH2,
 /// BVH4, BVH8, their batches): each plane distance one fused multiply-add, `bound * inv -
 /// origin * inv`, and a box hit when `near <= far`, as Embree tests boxes unless a scene asks for
@@ -136,14 +144,16 @@ pub struct Watertight;
 /// ([`intersect_aabb_fast_scalar`](crate::intersect::aabb::intersect_aabb_fast_scalar)).
 ///
 /// What it trades: the conservative test (the default, [`TriangleTest::CONSERVATIVE_BOXES`])
-/// never culls a box a ray touches, so closest hits equal brute force's exactly; the fast one can
-/// cull a box the ray grazes within about `|origin * inv| 2^-24` of its distance, and with it a
-/// hit on the box's surface. Every answer it gives is still a real hit (never closer than the
+/// never culls a box a ray touches; the fast one can cull a box the ray grazes within about
+/// `|origin * inv| 2^-24` of its distance, and with it a hit on the box's surface. A direction
+/// component below `1e-18` counts as `1e-18` (the reciprocal's clamp, as in Embree,
+/// [`PreparedRay::with_fast_inv`]): meant for directions of ordinary length; one scaled down to
+/// `1e-17` or less can miss boxes it crosses. Every answer it gives is still a real hit (never closer than the
 /// true closest one; an occlusion it reports is real): it only misses. Measured on the trace
 /// bench (README): 4 to 12% faster on primary, diffuse and shadow rays, BVH8, both scenes; on
 /// rays aimed at a closed mesh's edges and vertices, 20 of 20,496 fall through with the
 /// watertight test where none do with the conservative one. Ray packets keep the conservative
-/// test whatever the type.
+/// test whatever the type (they trace `Fast<T>` as `T`).
 ///
 /// ```
 /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Fast, Moller}};
@@ -155,13 +165,15 @@ pub struct Watertight;
 /// assert_eq!(Some(fast), b8.intersect::<Moller>(&ray)); // a ray through the middle: the same hit
 /// assert!(b2.intersect::<Fast<Moller>, _>(&tris[..], &ray).is_some());
 /// ```
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Fast<T>(core::marker::PhantomData<T>);
+pub type Fast<T> = WithBoxes<T, false>;
 
-impl<T: TriangleTest> TriangleTest for Fast<T> {
+/// `T` with the conservative box test, whatever `T` asks for (the packet traversals).
+pub(crate) type Conservative<T> = WithBoxes<T, true>;
+
+impl<T: TriangleTest, const CONSERVATIVE: bool> TriangleTest for WithBoxes<T, CONSERVATIVE> {
     const NAME: &'static str = T::NAME;
     const WATERTIGHT: bool = T::WATERTIGHT;
-    const CONSERVATIVE_BOXES: bool = false;
+    const CONSERVATIVE_BOXES: bool = CONSERVATIVE;
     #[inline(always)]
     fn intersect(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<Hit> {
         T::intersect(ray, tri, prim)

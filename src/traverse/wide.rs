@@ -233,7 +233,7 @@ pub fn intersect_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
 
 /// [`intersect_batch_incoherent`] in the order `order`: for each entry `i` of `order`, `hits[i]`
 /// for `rays[i]` (entries past the shorter of `rays` and `hits` are skipped; slots `order` does
-/// not name keep their value). With an order from [`RayOrder`](super::order::RayOrder), rays
+/// not name keep their value). With an order from `traverse::order::RayOrder` (`alloc`), rays
 /// whose origins lie close together run one after another and find each other's nodes in the
 /// cache; the hits are those of one call per ray.
 ///

@@ -60,7 +60,7 @@ pub use tile::TileShape;
 #[cfg(feature = "alloc")]
 pub use tile::image_rays;
 
-use super::TriangleTest;
+use super::{Conservative, TriangleTest};
 use crate::geometry::{Hit, Ray, Triangles};
 use crate::layout::BvhWideRef;
 use crate::math::{Lane, f32x4, f32x8};
@@ -141,7 +141,7 @@ pub fn intersect_packet<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     switch: u32,
 ) {
     const { assert!(R::N == K && K <= 16) };
-    wide::intersect::<T, L, N, R, K>(bvh, rays, hits, switch);
+    wide::intersect::<Conservative<T>, L, N, R, K>(bvh, rays, hits, switch);
 }
 
 /// Any-hit answers of up to `K` rays (`occluded[i]` for `rays[i]`) through the wide BVH `bvh`:
@@ -172,7 +172,7 @@ pub fn occluded_packet<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
     switch: u32,
 ) {
     const { assert!(R::N == K && K <= 16) };
-    wide::occluded::<T, L, N, R, K>(bvh, rays, occluded, switch);
+    wide::occluded::<Conservative<T>, L, N, R, K>(bvh, rays, occluded, switch);
 }
 
 /// Closest hits of up to 4 rays through a wide BVH ([`intersect_packet`] with [`f32x4`] lanes).
@@ -342,7 +342,7 @@ pub fn intersect_packet_bvh2<T: TriangleTest, P: Triangles + ?Sized, R: Lane, co
     const { assert!(R::N == K && K <= 16) };
     let n = rays.len().min(hits.len()).min(K);
     let mut best = [None; K];
-    bvh2::run::<T, P, R, K, false>(bvh, tris, &rays[..n], &mut best);
+    bvh2::run::<Conservative<T>, P, R, K, false>(bvh, tris, &rays[..n], &mut best);
     hits[..n].copy_from_slice(&best[..n]);
 }
 
@@ -372,7 +372,7 @@ pub fn occluded_packet_bvh2<T: TriangleTest, P: Triangles + ?Sized, R: Lane, con
     const { assert!(R::N == K && K <= 16) };
     let n = rays.len().min(occluded.len()).min(K);
     let mut best = [None; K];
-    let mask = bvh2::run::<T, P, R, K, true>(bvh, tris, &rays[..n], &mut best);
+    let mask = bvh2::run::<Conservative<T>, P, R, K, true>(bvh, tris, &rays[..n], &mut best);
     for (i, o) in occluded[..n].iter_mut().enumerate() {
         *o = mask >> i & 1 == 1;
     }
