@@ -42,7 +42,7 @@
 use crate::build::radix::{Item, sort_items};
 use crate::geometry::morton::{BITS_PER_AXIS_30, MortonQuantizer, morton30_x8};
 use crate::geometry::{Aabb, Ray};
-use crate::math::f32x8;
+use crate::math::{Lane, f32x8};
 use alloc::vec::Vec;
 use glam::Vec3A;
 
@@ -91,8 +91,9 @@ impl RayOrder {
         let mut chunks = rays.chunks_exact(8);
         let mut base = 0u32;
         for c in &mut chunks {
-            let lane = |a: usize| f32x8::new(core::array::from_fn(|i| c[i].origin[a]));
-            let codes = morton30_x8(lane(0), lane(1), lane(2), &q).to_array();
+            // A ray's eight floats start with its origin: lanes 0-2 of the transpose.
+            let [x, y, z, ..] = f32x8::transpose8(bytemuck::cast_slice::<Ray, [f32; 8]>(c));
+            let codes = morton30_x8(x, y, z, &q).to_array();
             self.items.extend((0..8).map(|i| Item {
                 key: codes[i] >> shift,
                 val: base + i as u32,

@@ -613,16 +613,12 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     /// }
     /// ```
     pub fn intersect_batch_reordered<T: TriangleTest>(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        let mut order = super::order::RayOrder::new();
-        let n = rays.len().min(hits.len());
-        intersect_batch_ordered::<T, L, N>(self.view(), &rays[..n], order.compute(&rays[..n]), hits);
-        if n > u32::MAX as usize {
-            intersect_batch_incoherent::<T, L, N>(
-                self.view(),
-                &rays[u32::MAX as usize..n],
-                &mut hits[u32::MAX as usize..n],
-            );
-        }
+        reordered(
+            rays,
+            hits,
+            |r, o, h| intersect_batch_ordered::<T, L, N>(self.view(), r, o, h),
+            |r, h| intersect_batch_incoherent::<T, L, N>(self.view(), r, h),
+        );
     }
 
     /// Any-hit answers of a batch of incoherent rays, traced in the Morton order of their
@@ -642,16 +638,12 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     /// assert_eq!(out, [false, true, true, true, false]);
     /// ```
     pub fn occluded_batch_reordered<T: TriangleTest>(&self, rays: &[Ray], occluded: &mut [bool]) {
-        let mut order = super::order::RayOrder::new();
-        let n = rays.len().min(occluded.len());
-        occluded_batch_ordered::<T, L, N>(self.view(), &rays[..n], order.compute(&rays[..n]), occluded);
-        if n > u32::MAX as usize {
-            occluded_batch_incoherent::<T, L, N>(
-                self.view(),
-                &rays[u32::MAX as usize..n],
-                &mut occluded[u32::MAX as usize..n],
-            );
-        }
+        reordered(
+            rays,
+            occluded,
+            |r, o, out| occluded_batch_ordered::<T, L, N>(self.view(), r, o, out),
+            |r, out| occluded_batch_incoherent::<T, L, N>(self.view(), r, out),
+        );
     }
 
     /// [`intersect_batch`](Self::intersect_batch) on `threads` threads (`std`; at least 1, at
@@ -709,6 +701,25 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
         reordered_par(rays, occluded, threads, |r, o| {
             self.occluded_batch_incoherent::<T>(r, o)
         });
+    }
+}
+
+/// A reordered batch on the calling thread: the order of the rays' origins
+/// ([`RayOrder`](super::order::RayOrder)), then `ordered(rays, order, out)`; rays past the
+/// `u32::MAX` an order can index go to `rest(rays, out)` in their own order.
+#[cfg(feature = "alloc")]
+fn reordered<O>(
+    rays: &[Ray],
+    out: &mut [O],
+    ordered: impl Fn(&[Ray], &[u32], &mut [O]),
+    rest: impl Fn(&[Ray], &mut [O]),
+) {
+    let m = rays.len().min(out.len());
+    let n = m.min(u32::MAX as usize);
+    let mut order = super::order::RayOrder::new();
+    ordered(&rays[..n], order.compute(&rays[..n]), out);
+    if m > n {
+        rest(&rays[n..m], &mut out[n..m]);
     }
 }
 
