@@ -63,6 +63,11 @@ pub struct Builder {
     pub(crate) crefs: Vec<PrimRef>,
     pub(crate) calt: Vec<PrimRef>,
     pub(crate) top: Bvh2,
+    /// `Strategy::HlbvhSah`'s parts of pruned mini-trees (node indices), and the node array the
+    /// tree is laid out in (swapped with the output's, so both stay allocated between builds).
+    pub(crate) items: Vec<[u32; 2]>,
+    pub(crate) parts: Vec<(u32, u32, u32)>,
+    pub(crate) forest: Vec<crate::traverse::Node>,
     pub(crate) walk: WalkStack,
     /// Treelet restructuring's per-node state.
     pub(crate) treelet: TreeletScratch,

@@ -9,7 +9,7 @@
 //! array) and [`BuildStats`]. Needs the `alloc` feature; single-threaded, but for
 //! [`Builder::build_into_par`] and [`Bvh2::build_par`] (`std`), which build the median, binned-SAH
 //! and [`HlbvhSah`](Strategy::HlbvhSah) trees on several threads: the same tree, numbered
-//! differently.
+//! differently (HLBVH-SAH's pruned trees, laid out by shape, numbered the same).
 //!
 //! # Builders
 //! | [`Strategy`] | paper | per node | total |
@@ -19,7 +19,7 @@
 //! | [`SweepSah`](Strategy::SweepSah) | MacDonald and Booth 1990; Wald, Boulos, Shirley 2007 | sweep every boundary of three pre-sorted lists, stable partition, O(n) | O(n log n) after three radix sorts |
 //! | [`Lbvh`](Strategy::Lbvh) | Lauterbach et al. 2009; Karras 2012; near-cubic cells of Vinkler et al. 2017 ([`MortonCells`]) | binary search for the highest differing bit | O(n) after a radix sort |
 //! | [`Hlbvh`](Strategy::Hlbvh) | Pantaleoni and Luebke 2010; Garanzha et al. 2011 | LBVH bottoms in clusters of up to [`cluster_size`](BuildParams::cluster_size) codes (SAH leaf collapse), binned SAH over the clusters' boxes on top | O(n) after a radix sort, plus binned SAH over the clusters |
-//! | [`HlbvhSah`](Strategy::HlbvhSah) | HLBVH clusters with Bonsai-style SAH mini-trees (Ganestam et al. 2015) | the binned builder within each cluster, in cache | O(n) sort, plus binned SAH over the clusters and within them |
+//! | [`HlbvhSah`](Strategy::HlbvhSah) | HLBVH clusters with Bonsai-style SAH mini-trees, pruned on multi-scale scenes (Ganestam et al. 2015) | the binned builder within each cluster, in cache | O(n) sort, plus binned SAH over the clusters and within them |
 //! | [`Ploc`](Strategy::Ploc) | Meister and Bittner 2018 (search radius 1) | Morton-sorted clusters merged bottom-up with the neighbour of smaller union area, where the two prefer each other; one-primitive leaves | O(n log n) after a radix sort; O(n) rounds on even scenes |
 //! | [`Refine::Rotations`] (after any of them) | Kensler 2008 | the best of six child/grandchild swaps where it shrinks the two children's boxes | O(n) per round |
 //! | [`Refine::Treelets`] (after any of them) | Karras and Aila 2013 (TRBVH) | best topology of a 3 ..= 8-leaf treelet by dynamic programming over its leaf subsets, `~3^k / 2` steps | O(n) per round |
