@@ -437,3 +437,68 @@ fn fast_slabs_are_scale_free_and_packets_stay_conservative() {
         assert_eq!(b2_fast, b2_plain);
     }
 }
+
+/// A hit is reported at a finite `t` only. With `tmin = -inf`, a triangle 1,000 units behind the
+/// origin of a ray whose direction has length 1e-37 lies at `t = -1e40`, which overflows: every
+/// path (the kernels, brute force, BVH2, BVH4, BVH8, batches, packets) reports no hit, where
+/// before this policy they reported one at `t = -inf`. The same ray with a unit direction finds
+/// it at `t = -1000`, and so does every path.
+#[test]
+fn hits_beyond_f32_range_are_misses() {
+    use strahl::traverse::packet;
+    let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    let mut tris = vec![tri; 3];
+    tris[1] = [
+        Vec3::new(5.0, 5.0, 0.0),
+        Vec3::new(6.0, 5.0, 0.0),
+        Vec3::new(5.0, 6.0, 0.0),
+    ];
+    tris[2] = [
+        Vec3::new(-5.0, 5.0, 2.0),
+        Vec3::new(-4.0, 5.0, 2.0),
+        Vec3::new(-5.0, 6.0, 2.0),
+    ];
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let (b4, b8) = (
+        Bvh4::from_bvh2(&b2, &tris[..]).unwrap(),
+        Bvh8::from_bvh2(&b2, &tris[..]).unwrap(),
+    );
+    let o = Vec3::new(0.25, 0.25, 1000.0);
+    for (d, want) in [(Vec3::new(0.0, 0.0, 1e-37), None), (Vec3::Z, Some(-1000.0f32))] {
+        let ray = Ray::with_range(o, d, f32::NEG_INFINITY, f32::INFINITY);
+        let p = PreparedRay::new(&ray);
+        let kernels = [
+            strahl::intersect::moller::intersect_scalar(&p, &tri, 0),
+            strahl::intersect::watertight::intersect_scalar(&p, &tri, 0),
+        ];
+        let hits = [
+            intersect_brute_force::<Moller, _>(&tris[..], &ray),
+            intersect_brute_force::<Watertight, _>(&tris[..], &ray),
+            b2.intersect::<Moller, _>(&tris[..], &ray),
+            b4.intersect::<Watertight>(&ray),
+            b8.intersect::<Moller>(&ray),
+            b8.intersect::<Fast<Moller>>(&ray),
+        ];
+        let mut batch = [None; 2];
+        b8.intersect_batch_incoherent::<Watertight>(&[ray, ray], &mut batch);
+        let mut packed = [None; 8];
+        packet::intersect8::<Watertight, _, 8>(b8.view(), &[ray; 8], &mut packed, 0);
+        let all = kernels.iter().chain(&hits).chain(&batch).chain(&packed);
+        for (k, h) in all.enumerate() {
+            assert_eq!(h.map(|h| h.t), want, "path {k}, direction {d}");
+            if let Some(h) = h {
+                assert!(h.u.is_finite() && h.v.is_finite(), "path {k}: {h:?}");
+            }
+        }
+        let mut occ = [false; 8];
+        packet::occluded8::<Moller, _, 8>(b8.view(), &[ray; 8], &mut occ);
+        let any = [
+            occluded_brute_force::<Moller, _>(&tris[..], &ray),
+            b2.occluded::<Watertight, _>(&tris[..], &ray),
+            b8.occluded::<Moller>(&ray),
+            occ[0],
+            occ[7],
+        ];
+        assert!(any.iter().all(|&a| a == want.is_some()), "{any:?}, direction {d}");
+    }
+}

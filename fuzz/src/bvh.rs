@@ -202,10 +202,18 @@ pub fn check_bvh(case: &BvhCase) {
                 params.strategy
             );
         }
-        // Bit for bit (the same walk): a hit at an infinite `t` (a ray with `tmin = -inf` and a
-        // tiny direction, found by this target) can carry NaN barycentrics, which `==` never
-        // equates.
-        let bits = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim));
+        // Bit for bit (the same walk). A hit has a finite `t` and finite barycentrics: a ray
+        // with `tmin = -inf` and a tiny direction (found by this target) once hit at `t = -inf`
+        // with NaN barycentrics; `tmin` is now taken as `-f32::MAX` there.
+        let bits = |h: Option<Hit>| {
+            h.map(|h| {
+                assert!(
+                    h.t.is_finite() && h.u.is_finite() && h.v.is_finite(),
+                    "a hit off the finite range: {h:?}"
+                );
+                (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.prim)
+            })
+        };
         let mut batch_hits = vec![None; case.rays.len()];
         b8.intersect_batch_incoherent::<Watertight>(&case.rays, &mut batch_hits);
         let mut ordered_hits = vec![None; case.rays.len()];

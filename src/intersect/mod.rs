@@ -25,7 +25,9 @@
 //!   interval `tmin = +inf, tmax = -inf`.
 //! - A degenerate triangle ([`is_degenerate`](crate::geometry::is_degenerate): a non-finite vertex,
 //!   or an exactly zero edge cross product) is never hit.
-//! - A reported `t` is never NaN: it satisfies `tmin <= t < tmax`.
+//! - A reported `t` is never NaN nor infinite: it satisfies `tmin <= t < tmax`, with `tmin`
+//!   taken as `-f32::MAX` where it is `-inf` (a triangle whose distance along the ray overflows
+//!   is a miss, as in [Range](#range)).
 //! - Boxes: see [`aabb`] for `+-0` direction components, origins on slab planes and flat boxes.
 //!
 //! # Range
@@ -145,6 +147,10 @@ impl PreparedRay {
         }
         let inv = Vec3A::ONE / d;
         let neg = d.is_negative_bitmask();
+        // A hit is reported at a finite `t` only: with `tmin = -inf`, a ray whose direction is
+        // tiny next to its distance from a triangle behind it would find it at `t = -inf` (the
+        // quotient overflows), with barycentrics that can be NaN.
+        let tmin = ray.tmin.max(-f32::MAX);
         // PERF: a return of its own, not one struct literal with `(k, shear)` chosen by an `if`:
         // that form made 8-ray packets 7% slower (bunny, 1024 x 1024, best of 120; the K-lane
         // preparation loop compiled worse), single rays the same.
@@ -153,7 +159,7 @@ impl PreparedRay {
                 origin: ray.origin,
                 direction: d.into(),
                 inv_dir: inv.into(),
-                tmin: ray.tmin,
+                tmin,
                 tmax: ray.tmax,
                 neg: [neg & 1 != 0, neg & 2 != 0, neg & 4 != 0],
                 k: Self::EMPTY.k,
@@ -178,7 +184,7 @@ impl PreparedRay {
             origin: ray.origin,
             direction: d.into(),
             inv_dir: inv.into(),
-            tmin: ray.tmin,
+            tmin,
             tmax: ray.tmax,
             neg: [neg & 1 != 0, neg & 2 != 0, neg & 4 != 0],
             k: [kx, ky, kz],
@@ -252,7 +258,7 @@ mod tests {
             origin: ray.origin,
             direction: d,
             inv_dir: Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z),
-            tmin: ray.tmin,
+            tmin: ray.tmin.max(-f32::MAX),
             tmax: ray.tmax,
             neg: [d.x.is_sign_negative(), d.y.is_sign_negative(), d.z.is_sign_negative()],
             k: [kx, ky, kz],

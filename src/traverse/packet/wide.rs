@@ -235,6 +235,8 @@ pub(super) fn root_lanes<L: Lane, const N: usize, R: Lane, const K: usize>(
         inv[a] = R::splat(1.0) / flushed[a];
     }
     let valid = valid & moving;
+    // `tmin` no lower than `-f32::MAX`, as `PreparedRay::new` takes it.
+    let tmin = tmin.max_l(R::splat(-f32::MAX));
     let (tmin, tmax) = (valid.select(tmin, inf), valid.select(tmax, R::splat(f32::NEG_INFINITY)));
     // Full lane masks of the reciprocal's sign (what `neg` holds); invalid lanes miss anyway.
     let neg = inv.map(|v| v.lt(zero));
