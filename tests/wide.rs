@@ -447,7 +447,7 @@ fn fast_slabs_are_scale_free_and_packets_stay_conservative() {
 fn hits_beyond_f32_range_are_misses() {
     use strahl::traverse::packet;
     let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
-    let mut tris = vec![tri; 3];
+    let mut tris = [tri; 3];
     tris[1] = [
         Vec3::new(5.0, 5.0, 0.0),
         Vec3::new(6.0, 5.0, 0.0),
