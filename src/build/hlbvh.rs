@@ -33,7 +33,8 @@
 //! **Depth.** With clusters of at most `M` primitives, the top is built with the depth bound
 //! `max_depth - ceil(log2 M)`, so each cluster's bottom (at most `ceil(log2 M)` levels more, by
 //! the LBVH's own bound) fits; the cluster size is capped so that the top still fits a balanced
-//! tree over up to `n` clusters.
+//! tree over up to `n` clusters. The pruned path bounds its top by the mini-trees' depth instead
+//! (see [`sah_pruned`]).
 
 use super::binned::Bins;
 use super::builder::{Builder, Counters};
@@ -294,16 +295,21 @@ fn leftmost_slot(nodes: &[Node], mut i: u32) -> u32 {
 ///    The copy numbers nodes by the tree's shape alone, so the threaded build lays out the same
 ///    array as the single-threaded one.
 ///
-/// **Depth.** Mini-trees start at depth `s = 1 + ceil(log2 n)`; the top is built with the bound
-/// `s`, which any top over at most `n` parts meets, and a part at depth `d >= 0` of its
-/// mini-tree was built with room for `max_depth - s - d` levels below it. The cluster cap in
-/// [`hierarchy`] keeps `s + ceil(log2 M) <= max_depth` for clusters of `M` references.
+/// **Depth.** There are at most `m = min(n, 8 clusters)` parts, so mini-trees start at depth
+/// `s = 1 + ceil(log2 m)`, where a balanced top over any `m` parts ends. If the deepest mini-tree
+/// leaf lands at depth `D` (`D <= max_depth`), no part reaches more than `D - s` levels below its
+/// root, so the top is built with the bound `max_depth - (D - s) >= s`: every leaf stays within
+/// `max_depth`, and the top is split by the SAH wherever that leaves room (a bound of `s` alone
+/// forced median splits once the parts came close to `n`, as with clusters of 1 primitive). The
+/// cluster cap in [`hierarchy`] keeps `1 + ceil(log2 n) + ceil(log2 M) <= max_depth` for
+/// clusters of `M` references, so the mini-trees fit below `s`.
 fn sah_pruned(b: &mut Builder, n: u32, p: &BuildParams, out: &mut Bvh2, threads: usize) -> Counters {
     let bp = BuildParams {
         strategy: Strategy::BinnedSah,
         ..*p
     };
-    let s = (1 + ceil_log2(n)).min(p.max_depth);
+    let parts_max = (n as usize).min(b.clusters.len().saturating_mul(PARTS_PER_CLUSTER));
+    let s = (1 + ceil_log2(parts_max as u32)).min(p.max_depth);
     let mut c = Counters::default();
 
     // 1. The mini-trees, roots first (one per cluster, in cluster order).
@@ -398,7 +404,7 @@ fn sah_pruned(b: &mut Builder, n: u32, p: &BuildParams, out: &mut Bvh2, threads:
         max_leaf_size: 1,
         bins: TOP_BINS,
         bin_axes: super::BinAxes::All,
-        max_depth: s,
+        max_depth: p.max_depth - (c.max_depth.max(s) - s),
         ..*p
     };
     let top = &mut b.top;

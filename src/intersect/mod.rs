@@ -26,7 +26,8 @@
 //! - A degenerate triangle ([`is_degenerate`](crate::geometry::is_degenerate): a non-finite vertex,
 //!   or an exactly zero edge cross product) is never hit.
 //! - A reported `t` is never NaN nor infinite: it satisfies `tmin <= t < tmax`, with `tmin`
-//!   taken as `-f32::MAX` where it is `-inf` (a triangle whose distance along the ray overflows
+//!   taken as `-f32::MAX` where it is `-inf` by [`PreparedRay::new`] (and the packet setup; a
+//!   `PreparedRay` whose fields are written by hand keeps what it is given) (a triangle whose distance along the ray overflows
 //!   is a miss, as in [Range](#range)).
 //! - Boxes: see [`aabb`] for `+-0` direction components, origins on slab planes and flat boxes.
 //!
