@@ -521,6 +521,59 @@ fn geometric_series_makes_no_deep_tree() {
     }
 }
 
+/// A depth bound that forces nothing changes nothing: every top-down builder makes the very same
+/// tree (nodes and primitive order) under any bound its build with `max_depth = 64` never had to
+/// force a split for. The scene: icospheres of radius `2^-i` (a deep tree) whose triangles'
+/// centroids tie on an axis in pairs, whose order below a small range's root once depended on the
+/// bound (small ranges within 16 levels of it take the task loop instead of the local subtree
+/// builder, which ranked ties differently).
+#[test]
+fn a_depth_bound_that_forces_nothing_changes_no_tree() {
+    let ball = scene::icosphere(1);
+    let tris: Vec<Triangle> = (0..60)
+        .flat_map(|i| {
+            let s = libm_exp2(-(i as f32));
+            let ball = &ball;
+            ball.indices
+                .iter()
+                .map(move |t| t.map(|k| ball.positions[k as usize] * (0.3 * s) + Vec3::new(s, 0.0, 0.0)))
+        })
+        .collect();
+    let mut binding = 0;
+    for (name, p) in builders()
+        .into_iter()
+        .chain([("hybrid_sah", BuildParams::hybrid_sah())])
+    {
+        let top_down = matches!(
+            p.strategy,
+            Strategy::Median | Strategy::BinnedSah | Strategy::SweepSah | Strategy::HlbvhSah
+        );
+        if !top_down || p.refine != Refine::None {
+            // LBVH and PLOC restructure what the bound cuts, refinement keeps every intermediate
+            // tree within it: other trees.
+            continue;
+        }
+        let (a, stats) = Bvh2::build(&tris[..], &BuildParams { max_depth: 64, ..p }).unwrap();
+        for max_depth in 34..64 {
+            let (b, again) = Bvh2::build(&tris[..], &BuildParams { max_depth, ..p }).unwrap();
+            if again.forced_splits > 0 {
+                continue;
+            }
+            // Small ranges deeper than `max_depth - 16` may have been built another way.
+            binding += usize::from(max_depth < stats.max_depth + 16);
+            assert_eq!(a.nodes.len(), b.nodes.len(), "{name} at {max_depth}");
+            let same = a
+                .nodes
+                .iter()
+                .zip(&b.nodes)
+                .all(|(x, y)| bytemuck::bytes_of(x) == bytemuck::bytes_of(y));
+            assert!(same, "{name} at {max_depth}: nodes differ");
+            assert_eq!(a.prim_indices, b.prim_indices, "{name} at {max_depth}");
+        }
+    }
+    assert!(binding >= 20, "{binding}");
+}
+
 fn libm_exp2(x: f32) -> f32 {
     2f32.powf(x)
 }

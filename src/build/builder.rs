@@ -56,9 +56,11 @@ pub struct Builder {
     /// The full sweep's suffix areas and side flags.
     pub(crate) suffix: Vec<f32>,
     pub(crate) flags: Vec<bool>,
-    /// The HLBVH's clusters (sorted ranges), a range stack, one reference per cluster and the
-    /// second buffer for them, the top tree over the clusters, and the LBVH walk's stack.
+    /// The HLBVH's clusters (sorted ranges) and their boxes and centroid bounds, a range stack,
+    /// one reference per cluster and the second buffer for them, the top tree over the clusters,
+    /// and the LBVH walk's stack.
     pub(crate) clusters: Vec<[u32; 2]>,
+    pub(crate) cluster_bounds: Vec<(super::prims::Box8, super::prims::CBounds)>,
     pub(crate) ranges: Vec<[u32; 2]>,
     pub(crate) crefs: Vec<PrimRef>,
     pub(crate) calt: Vec<PrimRef>,

@@ -127,13 +127,14 @@ fn hierarchy<K: Code>(
     let largest = clusters.iter().map(|c| c[1] - c[0]).max().unwrap_or(1);
 
     // One reference per cluster: its box, the cluster number as the index.
+    // Each cluster's box and centroid bounds, kept for its mini-tree.
     let crefs = &mut b.crefs;
     crefs.clear();
+    b.cluster_bounds.clear();
     let (mut bounds, mut cbounds) = (Box8::EMPTY, CBounds::EMPTY);
     for (k, &[lo, hi]) in clusters.iter().enumerate() {
-        let bx = b.alt[lo as usize..hi as usize]
-            .iter()
-            .fold(Box8::EMPTY, |acc, r| acc.union(r.bounds()));
+        let (bx, cb) = topdown::bounds_of(&b.alt[lo as usize..hi as usize]);
+        b.cluster_bounds.push((bx, cb));
         let r = PrimRef::from_box(bx, k as u32);
         bounds.grow(r.bounds());
         cbounds.grow(r.c2());
@@ -192,7 +193,7 @@ fn hierarchy<K: Code>(
             }
             let k = top.prim_indices.get(node.index as usize).copied().unwrap_or(0);
             let [lo, hi] = clusters[k as usize];
-            let (bx, cb) = topdown::bounds_of(&b.alt[lo as usize..hi as usize]);
+            let (bx, cb) = b.cluster_bounds[k as usize];
             let task = topdown::Task::new([i, lo, hi, depth], bx, cb);
             if threads > 1 {
                 par.push(task);
@@ -317,8 +318,7 @@ fn sah_pruned(b: &mut Builder, n: u32, p: &BuildParams, out: &mut Bvh2, threads:
     out.nodes.reserve((2 * n as usize).saturating_sub(1) + b.clusters.len());
     let mut tasks: Vec<topdown::Task> = Vec::with_capacity(b.clusters.len());
     let mut area_sum = 0.0f64;
-    for &[lo, hi] in &b.clusters {
-        let (bx, cb) = topdown::bounds_of(&b.alt[lo as usize..hi as usize]);
+    for (&[lo, hi], &(bx, cb)) in b.clusters.iter().zip(&b.cluster_bounds) {
         let root = out.nodes.len() as u32;
         out.nodes.push(bx.to_node(0, 0));
         area_sum += f64::from(bx.half_area_nonempty());
