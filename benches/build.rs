@@ -8,6 +8,7 @@
 //! STRAHL_BENCH_SCENES=all cargo bench --bench build -- --noplot   # + 1M terrain, 1M sphereflake
 //! STRAHL_BENCH_SCENES=terrain1M,sphereflake1M cargo bench ...     # any list of the four
 //! cargo bench --bench build -- --noplot build_threads         # the parallel builds only
+//! STRAHL_BENCH_SCENES=none cargo bench --bench build -- --noplot refit/   # refit against rebuild only
 //! ```
 //!
 //! Criterion reports build throughput as `thrpt` in elements (triangles) per second, for *warm*
@@ -73,9 +74,9 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, BvhStats, MortonBits, Node, Refine, TreeletParams};
 use strahl::geometry::Triangle;
-use strahl::layout::Bvh8;
+use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
-use strahl::traverse::{STACK_SIZE, Watertight, intersect_scalar};
+use strahl::traverse::{Moller, STACK_SIZE, Watertight, intersect_scalar};
 use strahl::{Aabb, Ray, Vec3};
 
 struct Scene {
@@ -1028,5 +1029,98 @@ fn build_threads(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, build, build_threads);
+/// The 1M sphereflake bent by a wave of `amp` times its size: every vertex moves, connectivity
+/// stays.
+fn bent(tris: &[Triangle], amp: f32) -> Vec<Triangle> {
+    let mut b = Aabb::EMPTY;
+    for v in tris.iter().flatten() {
+        b.grow(*v);
+    }
+    let size = b.extent().max_element();
+    let k = std::f32::consts::TAU / size;
+    tris.iter()
+        .map(|t| t.map(|v| v + Vec3::new((k * v.y).sin(), 0.0, (k * v.x).cos()) * (amp * size)))
+        .collect()
+}
+
+/// `refit/sphereflake1M`: animated geometry, every frame. `BvhWide::refit` (BVH4, BVH8; BVH8 also
+/// with `refit_par` on every core) and `Bvh2::refit` to the bent sphereflake, against rebuilding (`Builder::build_into` with
+/// `BuildParams::default()`, warm, and `Bvh8::from_bvh2`), single thread. Then, printed: what the
+/// refit costs in trace time as the bend grows (BVH8 closest hits of 262,144 rays from
+/// `rays_for`, best of 3, refit tree against a rebuilt one; the hit counts checked equal).
+fn refit(c: &mut Criterion) {
+    let tris = scene::sphereflake(3, 3).to_soup();
+    let moved = bent(&tris, 0.01);
+    let p = BuildParams::default();
+    let mut builder = Builder::new();
+    let mut bvh2 = Bvh2::default();
+    builder.build_into(&tris[..], &p, &mut bvh2).expect("valid params");
+    let mut b8 = Bvh8::from_bvh2(&bvh2, &tris[..]).expect("a built tree collapses");
+    let mut b4 = Bvh4::from_bvh2(&bvh2, &tris[..]).expect("a built tree collapses");
+    let mut g = c.benchmark_group("refit/sphereflake1M");
+    g.throughput(Throughput::Elements(tris.len() as u64));
+    g.sample_size(10);
+    g.sampling_mode(SamplingMode::Flat);
+    g.warm_up_time(Duration::from_millis(500));
+    g.measurement_time(Duration::from_secs(3));
+    g.bench_function("bvh8_refit", |b| b.iter(|| b8.refit(black_box(&moved[..]))));
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if cores > 1 {
+        g.bench_function(format!("bvh8_refit_par/{cores}"), |b| {
+            b.iter(|| b8.refit_par(black_box(&moved[..]), cores))
+        });
+    }
+    g.bench_function("bvh4_refit", |b| b.iter(|| b4.refit(black_box(&moved[..]))));
+    let mut refit2 = bvh2.clone();
+    g.bench_function("bvh2_refit", |b| b.iter(|| refit2.refit(black_box(&moved[..]))));
+    let mut rebuilt = Bvh2::default();
+    g.bench_function("rebuild_bvh8", |b| {
+        b.iter(|| {
+            builder
+                .build_into(black_box(&moved[..]), &p, &mut rebuilt)
+                .expect("valid params");
+            Bvh8::from_bvh2(&rebuilt, &moved[..]).expect("a built tree collapses")
+        })
+    });
+    g.finish();
+
+    let rays = rays_for(&tris, 1 << 18);
+    let mut hits = vec![None; rays.len()];
+    let trace = |t: &Bvh8, hits: &mut [Option<strahl::Hit>]| {
+        (0..3)
+            .map(|_| {
+                let t0 = Instant::now();
+                t.intersect_batch::<Moller>(&rays, hits);
+                t0.elapsed().as_secs_f64() * 1e3
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    eprintln!(
+        "refit/sphereflake1M: BVH8 trace of {} rays after a bend, refit against rebuilt",
+        rays.len()
+    );
+    eprintln!("| bend (of the size) | refit ms | rebuilt ms | refit / rebuilt | SAH refit / rebuilt |");
+    eprintln!("|---|---|---|---|---|");
+    for amp in [0.0, 0.01, 0.05, 0.2] {
+        let moved = bent(&tris, amp);
+        let mut r8 = Bvh8::from_bvh2(&bvh2, &tris[..]).expect("a built tree collapses");
+        r8.refit(&moved[..]);
+        let mut r2 = bvh2.clone();
+        r2.refit(&moved[..]).expect("a built tree refits");
+        let (n2, _) = Bvh2::build(&moved[..], &p).expect("valid params");
+        let n8 = Bvh8::from_bvh2(&n2, &moved[..]).expect("a built tree collapses");
+        let t_refit = trace(&r8, &mut hits);
+        let a = hits.iter().filter(|h| h.is_some()).count();
+        let t_new = trace(&n8, &mut hits);
+        let b = hits.iter().filter(|h| h.is_some()).count();
+        assert_eq!(a, b, "bend {amp}: refit and rebuilt trees hit differently");
+        eprintln!(
+            "| {amp} | {t_refit:.1} | {t_new:.1} | {:.2}x | {:.2}x |",
+            t_refit / t_new,
+            r2.sah_cost(1.0, 1.0) / n2.sah_cost(1.0, 1.0)
+        );
+    }
+}
+
+criterion_group!(benches, build, build_threads, refit);
 criterion_main!(benches);

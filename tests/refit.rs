@@ -1,0 +1,304 @@
+//! `BvhWide::refit`: a refit with unchanged triangles changes no bit of the tree; after the
+//! triangles move (rigidly, by jitter larger than themselves, through shared vertices of an
+//! indexed mesh, onto one point), become non-finite or go missing, every child box is the exact
+//! box of the finite triangles below it, and BVH4/BVH8 closest and any hits equal brute force's
+//! over the moved triangles.
+
+mod common;
+
+use common::{mixed_rays, same};
+use strahl::build::{BuildParams, Bvh2};
+use strahl::geometry::{INVALID, Triangle, Triangles};
+use strahl::layout::{BvhWide, EMPTY_CHILD, LEAF_BIT, leaf_packs};
+use strahl::math::{Lane, f32x4, f32x8};
+use strahl::scene::{self, Rng};
+use strahl::traverse::{Moller, Watertight, intersect_brute_force, occluded_brute_force};
+use strahl::{Ray, Vec3};
+
+/// Every word of two trees, lane by lane (`to_bits`), the same.
+fn identical<L: Lane, const N: usize>(a: &BvhWide<L, N>, b: &BvhWide<L, N>) -> bool {
+    let lanes = |v: &L| (0..N).map(|i| v.lane(i).to_bits()).collect::<Vec<_>>();
+    a.depth() == b.depth()
+        && a.nodes().len() == b.nodes().len()
+        && a.packs().len() == b.packs().len()
+        && a.nodes().iter().zip(b.nodes()).all(|(x, y)| {
+            x.child == y.child
+                && (0..3).all(|k| {
+                    lanes(&x.bounds.min[k]) == lanes(&y.bounds.min[k])
+                        && lanes(&x.bounds.max[k]) == lanes(&y.bounds.max[k])
+                })
+        })
+        && a.packs().iter().zip(b.packs()).all(|(x, y)| {
+            x.prim == y.prim
+                && x.valid == y.valid
+                && (0..3).all(|v| (0..3).all(|k| lanes(&x.v[v][k]) == lanes(&y.v[v][k])))
+        })
+}
+
+/// The exact box of the finite triangles (read from `tris`) below child code `code`, checked
+/// against every lane on the way: each child box must be exactly what it holds. Returns the box
+/// and counts the triangles seen in `seen`.
+fn check_boxes<L: Lane, const N: usize, P: Triangles + ?Sized>(
+    bvh: &BvhWide<L, N>,
+    tris: &P,
+    code: u32,
+    seen: &mut Vec<u32>,
+) -> (Vec3, Vec3) {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    if code & LEAF_BIT != 0 {
+        let (first, count) = leaf_packs(code);
+        for pack in &bvh.packs()[first..first + count] {
+            for (i, &p) in pack.prim.iter().enumerate() {
+                if p == INVALID {
+                    continue;
+                }
+                seen.push(p);
+                match tris.triangle(p as usize) {
+                    Some(t) if t.iter().all(|v| v.is_finite()) => {
+                        assert_eq!(pack.get(i), t, "prim {p}: lane not refilled");
+                        for v in t {
+                            (lo, hi) = (lo.min(v), hi.max(v));
+                        }
+                    }
+                    _ => assert_eq!(pack.valid >> i & 1, 0, "prim {p}: left out, still valid"),
+                }
+            }
+        }
+        return (lo, hi);
+    }
+    let node = &bvh.nodes()[code as usize];
+    for (slot, &c) in node.child.iter().enumerate() {
+        let (l, h) = if c == EMPTY_CHILD {
+            (Vec3::INFINITY, Vec3::NEG_INFINITY)
+        } else {
+            check_boxes(bvh, tris, c, seen)
+        };
+        let b = &node.bounds;
+        let got_lo = Vec3::new(b.min[0].lane(slot), b.min[1].lane(slot), b.min[2].lane(slot));
+        let got_hi = Vec3::new(b.max[0].lane(slot), b.max[1].lane(slot), b.max[2].lane(slot));
+        assert_eq!((got_lo, got_hi), (l, h), "node {code} slot {slot}");
+        (lo, hi) = (lo.min(l), hi.max(h));
+    }
+    (lo, hi)
+}
+
+/// Refits `bvh` to `tris` and checks it: the left-out count, the boxes, each triangle of the
+/// tree seen once, and closest and any hits against brute force over `tris` on mixed rays.
+fn refit_and_check<L: Lane, const N: usize>(bvh: &mut BvhWide<L, N>, tris: &[Triangle], n_prims: usize, what: &str) {
+    let want_out = (0..n_prims)
+        .filter(|&p| !tris.get(p).is_some_and(|t| t.iter().all(|v| v.is_finite())))
+        .count();
+    assert_eq!(bvh.refit(tris), want_out, "{what}");
+    let mut seen = Vec::new();
+    if !bvh.is_empty() {
+        check_boxes(bvh, tris, 0, &mut seen);
+    }
+    seen.sort_unstable();
+    assert_eq!(
+        seen,
+        (0..n_prims as u32).collect::<Vec<_>>(),
+        "{what}: each triangle once"
+    );
+    // Rays over the finite triangles (mixed_rays skips nothing: it needs some triangles).
+    let finite: Vec<Triangle> = tris
+        .iter()
+        .copied()
+        .filter(|t| t.iter().all(|v| v.is_finite()))
+        .collect();
+    let rays = if finite.is_empty() {
+        vec![Ray::new(Vec3::splat(-1.0), Vec3::ONE)]
+    } else {
+        mixed_rays(&finite, 400, 3)
+    };
+    for ray in &rays {
+        same(
+            bvh.intersect::<Watertight>(ray),
+            intersect_brute_force::<Watertight, _>(tris, ray),
+            tris,
+            ray,
+            what,
+        );
+        same(
+            bvh.intersect::<Moller>(ray),
+            intersect_brute_force::<Moller, _>(tris, ray),
+            tris,
+            ray,
+            what,
+        );
+        assert_eq!(
+            bvh.occluded::<Watertight>(ray),
+            occluded_brute_force::<Watertight, _>(tris, ray),
+            "{what}: {ray:?}"
+        );
+    }
+}
+
+/// The ways triangles move, each a function of the original soup.
+fn motions(tris: &[Triangle], seed: u64) -> Vec<(&'static str, Vec<Triangle>)> {
+    let mut rng = Rng::new(seed);
+    let map = |f: &dyn Fn(Vec3) -> Vec3| tris.iter().map(|t| t.map(f)).collect::<Vec<_>>();
+    let rigid = map(&|v| {
+        let (s, c) = 0.7f32.sin_cos();
+        Vec3::new(c * v.x - s * v.z, v.y, s * v.x + c * v.z) * 3.0 + Vec3::new(100.0, -4.0, 0.5)
+    });
+    let jitter: Vec<Triangle> = tris
+        .iter()
+        .map(|t| t.map(|v| v + Vec3::new(rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), rng.range(-0.3, 0.3))))
+        .collect();
+    let point = map(&|_| Vec3::splat(2.0));
+    let mut broken = jitter.clone();
+    for (i, t) in broken.iter_mut().enumerate() {
+        match i % 7 {
+            0 => t[1].y = f32::NAN,
+            3 => t[2].x = f32::INFINITY,
+            _ => {}
+        }
+    }
+    vec![
+        ("rigid", rigid),
+        ("jitter", jitter),
+        ("point", point),
+        ("non-finite", broken),
+    ]
+}
+
+fn check_width<L: Lane, const N: usize>(tris: &[Triangle], name: &str) {
+    for (pname, p) in [("default", BuildParams::default()), ("fastest", BuildParams::fastest())] {
+        let (b2, _) = Bvh2::build(tris, &p).unwrap();
+        let trees = [
+            ("cost-optimal", BvhWide::<L, N>::from_bvh2(&b2, tris).unwrap()),
+            ("greedy", BvhWide::<L, N>::from_bvh2_greedy(&b2, tris).unwrap()),
+            ("threaded", BvhWide::<L, N>::from_bvh2_par(&b2, tris, 2).unwrap()),
+        ];
+        for (cname, tree) in trees {
+            let what = format!("{name} / {pname} / {cname} / {N} wide");
+            // Unchanged triangles: not a bit changes.
+            let mut same_tree = tree.clone();
+            assert_eq!(same_tree.refit(tris), 0, "{what}");
+            assert!(
+                identical(&same_tree, &tree),
+                "{what}: a refit without motion changed the tree"
+            );
+            for (motion, moved) in motions(tris, 5) {
+                let mut t = tree.clone();
+                refit_and_check(&mut t, &moved, tris.len(), &format!("{what} / {motion}"));
+                // And back: the very tree of the start again.
+                assert_eq!(t.refit(tris), 0);
+                assert!(
+                    identical(&t, &tree),
+                    "{what} / {motion}: not the same tree after moving back"
+                );
+            }
+            // Triangles gone missing (a shorter slice): left out, the rest exact.
+            let mut t = tree.clone();
+            let half = &tris[..tris.len() / 2];
+            let mut seen = Vec::new();
+            assert_eq!(t.refit(half), tris.len() - half.len(), "{what}");
+            if !t.is_empty() {
+                check_boxes(&t, half, 0, &mut seen);
+            }
+            let rays = mixed_rays(tris, 300, 9);
+            for ray in &rays {
+                same(
+                    t.intersect::<Watertight>(ray),
+                    intersect_brute_force::<Watertight, _>(half, ray),
+                    half,
+                    ray,
+                    &what,
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn refits_are_exact_in_every_width() {
+    let flake = scene::sphereflake(1, 1).to_soup();
+    let soup = {
+        let mut rng = Rng::new(11);
+        (0..3000)
+            .map(|_| {
+                let c = Vec3::new(rng.range(-5.0, 5.0), rng.range(-5.0, 5.0), rng.range(-5.0, 5.0));
+                [c, c + rng.unit_vector() * 0.4, c + rng.unit_vector() * 0.4]
+            })
+            .collect::<Vec<Triangle>>()
+    };
+    for (name, tris) in [("sphereflake", &flake), ("soup", &soup)] {
+        check_width::<f32x4, 4>(tris, name);
+        check_width::<f32x8, 8>(tris, name);
+    }
+}
+
+/// An indexed mesh: moving a shared vertex moves every triangle around it; an index past the
+/// vertex array leaves its triangles out.
+#[test]
+fn indexed_meshes_refit_through_shared_vertices() {
+    let mut mesh = scene::icosphere(3);
+    let (b2, _) = Bvh2::build(&mesh.as_indexed(), &BuildParams::default()).unwrap();
+    let mut b8 = BvhWide::<f32x8, 8>::from_bvh2(&b2, &mesh.as_indexed()).unwrap();
+    for (i, p) in mesh.positions.iter_mut().enumerate() {
+        // A bumpy sphere: each vertex out or in along its normal.
+        *p *= 1.0 + 0.2 * ((i * 7919) % 13) as f32 / 13.0;
+    }
+    assert_eq!(b8.refit(&mesh.as_indexed()), 0);
+    let soup = mesh.to_soup();
+    let mut seen = Vec::new();
+    check_boxes(&b8, &mesh.as_indexed(), 0, &mut seen);
+    for ray in &mixed_rays(&soup, 400, 1) {
+        same(
+            b8.intersect::<Watertight>(ray),
+            intersect_brute_force::<Watertight, _>(&soup[..], ray),
+            &soup,
+            ray,
+            "bumpy icosphere",
+        );
+    }
+    // The last vertex dropped from the array: the triangles that use it are left out.
+    let using = mesh
+        .indices
+        .iter()
+        .filter(|t| t.contains(&(mesh.positions.len() as u32 - 1)))
+        .count();
+    mesh.positions.pop();
+    assert_eq!(b8.refit(&mesh.as_indexed()), using);
+}
+
+#[test]
+fn an_empty_tree_refits_to_nothing() {
+    let tris = [[Vec3::splat(f32::NAN); 3]];
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let mut b8 = BvhWide::<f32x8, 8>::from_bvh2(&b2, &tris[..]).unwrap();
+    assert!(b8.is_empty());
+    assert_eq!(b8.refit(&[[Vec3::ZERO, Vec3::X, Vec3::Y]][..]), 0);
+    assert!(
+        b8.intersect::<Moller>(&Ray::new(Vec3::new(0.1, 0.1, -1.0), Vec3::Z))
+            .is_none()
+    );
+}
+
+/// `refit_par` on 1 to 4 threads: the very tree `refit` makes, and the same count left out
+/// (the soup is large enough for every thread count to split the packs).
+#[test]
+fn threaded_refits_equal_the_single_threaded_one() {
+    fn check<L: Lane + Send, const N: usize>(tris: &[Triangle]) {
+        let (b2, _) = Bvh2::build(tris, &BuildParams::default()).unwrap();
+        let tree = BvhWide::<L, N>::from_bvh2(&b2, tris).unwrap();
+        assert!(
+            tree.packs().len() >= 4 * 1024,
+            "{} packs: too few to split",
+            tree.packs().len()
+        );
+        for (motion, moved) in motions(tris, 8) {
+            let mut one = tree.clone();
+            let want = one.refit(&moved[..]);
+            for threads in 1..=4 {
+                let mut par = tree.clone();
+                assert_eq!(par.refit_par(&moved[..], threads), want, "{motion} on {threads}");
+                assert!(identical(&one, &par), "{motion} on {threads} threads: another tree");
+            }
+        }
+    }
+    let tris = scene::thin_soup(40_000, 2);
+    check::<f32x4, 4>(&tris);
+    check::<f32x8, 8>(&tris);
+}
