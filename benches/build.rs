@@ -1044,7 +1044,9 @@ fn bent(tris: &[Triangle], amp: f32) -> Vec<Triangle> {
 }
 
 /// `refit/sphereflake1M`: animated geometry, every frame. `BvhWide::refit` (BVH4, BVH8; BVH8 also
-/// with `refit_par` on every core) and `Bvh2::refit` to the bent sphereflake, against rebuilding (`Builder::build_into` with
+/// with `refit_par` on every core) and `Bvh2::refit` to the bent sphereflake, and (feature
+/// `embree`) Embree's refit of a dynamic scene (`RTC_BUILD_QUALITY_REFIT`, vertices in a shared
+/// buffer) on one thread and on every core, against rebuilding (`Builder::build_into` with
 /// `BuildParams::default()`, warm, and `Bvh8::from_bvh2`), single thread. Then, printed: what the
 /// refit costs in trace time as the bend grows (BVH8 closest hits of 262,144 rays from
 /// `rays_for`, best of 3, refit tree against a rebuilt one; the hit counts checked equal).
@@ -1073,6 +1075,25 @@ fn refit(c: &mut Criterion) {
     g.bench_function("bvh4_refit", |b| b.iter(|| b4.refit(black_box(&moved[..]))));
     let mut refit2 = bvh2.clone();
     g.bench_function("bvh2_refit", |b| b.iter(|| refit2.refit(black_box(&moved[..]))));
+    // Embree's refit (`RTC_BUILD_QUALITY_REFIT`) on a device with one thread and with every
+    // core, its vertices shared (set once, outside the timing).
+    #[cfg(feature = "embree")]
+    for threads in [1, cores] {
+        let device = peers::embree::Device::with_threads(threads);
+        let mut scene = peers::embree::RefitScene::new(&device, &tris);
+        scene.set_vertices(&moved);
+        scene.refit();
+        let ray = Ray::new(Vec3::new(0.0, 0.0, -100.0), Vec3::Z);
+        assert_eq!(
+            scene.intersect1(&ray).is_some(),
+            b8.intersect::<Moller>(&ray).is_some(),
+            "Embree's refit scene hits differently"
+        );
+        g.bench_function(format!("peer/embree_refit/{threads}"), |b| b.iter(|| scene.refit()));
+        if cores == 1 {
+            break;
+        }
+    }
     let mut rebuilt = Bvh2::default();
     g.bench_function("rebuild_bvh8", |b| {
         b.iter(|| {

@@ -23,6 +23,8 @@ const RTC_FORMAT_UINT3: c_uint = 0x5003;
 const RTC_FORMAT_FLOAT3: c_uint = 0x9003;
 const RTC_INVALID_GEOMETRY_ID: c_uint = u32::MAX;
 const RTC_SCENE_FLAG_ROBUST: c_uint = 1 << 2;
+const RTC_SCENE_FLAG_DYNAMIC: c_uint = 1 << 0;
+const RTC_BUILD_QUALITY_REFIT: c_uint = 3;
 
 /// Embree's build quality levels.
 #[derive(Clone, Copy, Debug)]
@@ -169,6 +171,17 @@ unsafe extern "C" {
         count: usize,
     ) -> *mut c_void;
     fn rtcAttachGeometry(scene: RTCScene, geometry: RTCGeometry) -> c_uint;
+    fn rtcSetSharedGeometryBuffer(
+        geometry: RTCGeometry,
+        ty: c_uint,
+        slot: c_uint,
+        format: c_uint,
+        ptr: *const c_void,
+        byte_offset: usize,
+        byte_stride: usize,
+        count: usize,
+    );
+    fn rtcUpdateGeometryBuffer(geometry: RTCGeometry, ty: c_uint, slot: c_uint);
     fn rtcIntersect1(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
     fn rtcOccluded1(scene: RTCScene, ctx: *mut RTCIntersectContext, ray: *mut RTCRay);
     fn rtcIntersect8(valid: *const i32, scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit8);
@@ -283,21 +296,7 @@ impl<'d> Scene<'d> {
     /// Closest hit: `(t, primitive)`.
     #[inline]
     pub fn intersect1(&self, r: &Ray) -> Option<(f32, u32)> {
-        let mut rh = RTCRayHit {
-            ray: Self::ray(r),
-            hit: RTCHit {
-                ng: [0.0; 3],
-                u: 0.0,
-                v: 0.0,
-                prim_id: 0,
-                geom_id: RTC_INVALID_GEOMETRY_ID,
-                inst_id: [0],
-            },
-        };
-        let mut ctx = context();
-        // SAFETY: `rh` and `ctx` are valid, aligned, initialised structs for the call's duration.
-        unsafe { rtcIntersect1(self.scene, &mut ctx, &mut rh) };
-        (rh.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((rh.ray.tfar, rh.hit.prim_id))
+        intersect1(self.scene, r)
     }
 
     /// Any hit in `[tmin, tmax]`.
@@ -336,6 +335,133 @@ impl Drop for Scene<'_> {
     fn drop(&mut self) {
         // SAFETY: created by rtcNewScene, released once.
         unsafe { rtcReleaseScene(self.scene) }
+    }
+}
+
+/// `rtcIntersect1` on a committed scene: `(t, primitive)` of the closest hit.
+#[inline]
+fn intersect1(scene: RTCScene, r: &Ray) -> Option<(f32, u32)> {
+    let mut rh = RTCRayHit {
+        ray: Scene::ray(r),
+        hit: RTCHit {
+            ng: [0.0; 3],
+            u: 0.0,
+            v: 0.0,
+            prim_id: 0,
+            geom_id: RTC_INVALID_GEOMETRY_ID,
+            inst_id: [0],
+        },
+    };
+    let mut ctx = context();
+    // SAFETY: `rh` and `ctx` are valid, aligned, initialised structs for the call's duration;
+    // `scene` is a live, committed scene (the callers hold it).
+    unsafe { rtcIntersect1(scene, &mut ctx, &mut rh) };
+    (rh.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((rh.ray.tfar, rh.hit.prim_id))
+}
+
+/// A dynamic scene of one triangle mesh whose geometry is refitted on every commit: the scene at
+/// `RTC_BUILD_QUALITY_LOW` (a two-level structure, the only mode in which Embree reads a
+/// geometry's build quality), the geometry at `RTC_BUILD_QUALITY_REFIT`, `RTC_SCENE_FLAG_DYNAMIC`;
+/// its vertices in a buffer shared with Embree (no copy per refit, as an engine animating a mesh
+/// would set it up).
+#[allow(dead_code)] // used by some bench targets only
+pub struct RefitScene<'d> {
+    scene: RTCScene,
+    geom: RTCGeometry,
+    /// Nine floats per triangle and Embree's 16 bytes of read padding; never reallocated.
+    vertices: Vec<f32>,
+    _indices: Vec<u32>,
+    _device: &'d Device,
+}
+
+#[allow(dead_code)]
+impl<'d> RefitScene<'d> {
+    /// Builds the scene over `tris`.
+    pub fn new(device: &'d Device, tris: &[[Vec3; 3]]) -> Self {
+        let mut vertices = vec![0.0f32; tris.len() * 9 + 4];
+        let indices: Vec<u32> = (0..tris.len() as u32 * 3).collect();
+        for (i, t) in tris.iter().enumerate() {
+            for (j, p) in t.iter().enumerate() {
+                vertices[i * 9 + j * 3..i * 9 + j * 3 + 3].copy_from_slice(&p.to_array());
+            }
+        }
+        // SAFETY: standard Embree setup on a live device; the shared buffers outlive the scene
+        // (owned by `Self`, released after it in `drop`), are never reallocated, and hold their
+        // counts of items (plus Embree's padding for the vertices).
+        unsafe {
+            let scene = rtcNewScene(device.0);
+            rtcSetSceneFlags(scene, RTC_SCENE_FLAG_DYNAMIC);
+            rtcSetSceneBuildQuality(scene, Quality::Low as c_uint);
+            let geom = rtcNewGeometry(device.0, RTC_GEOMETRY_TYPE_TRIANGLE);
+            rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_REFIT);
+            rtcSetSharedGeometryBuffer(
+                geom,
+                RTC_BUFFER_TYPE_VERTEX,
+                0,
+                RTC_FORMAT_FLOAT3,
+                vertices.as_ptr().cast(),
+                0,
+                12,
+                tris.len() * 3,
+            );
+            rtcSetSharedGeometryBuffer(
+                geom,
+                RTC_BUFFER_TYPE_INDEX,
+                0,
+                RTC_FORMAT_UINT3,
+                indices.as_ptr().cast(),
+                0,
+                12,
+                tris.len(),
+            );
+            rtcCommitGeometry(geom);
+            rtcAttachGeometry(scene, geom);
+            rtcCommitScene(scene);
+            assert_eq!(rtcGetDeviceError(device.0), 0, "Embree reported an error");
+            Self {
+                scene,
+                geom,
+                vertices,
+                _indices: indices,
+                _device: device,
+            }
+        }
+    }
+
+    /// Overwrites the shared vertices with `tris` (same count; not a refit yet).
+    pub fn set_vertices(&mut self, tris: &[[Vec3; 3]]) {
+        for (i, t) in tris.iter().enumerate().take(self.vertices.len() / 9) {
+            for (j, p) in t.iter().enumerate() {
+                self.vertices[i * 9 + j * 3..i * 9 + j * 3 + 3].copy_from_slice(&p.to_array());
+            }
+        }
+    }
+
+    /// Refits Embree's BVH to the shared vertices: the buffer marked updated, the geometry and
+    /// the scene committed.
+    pub fn refit(&mut self) {
+        // SAFETY: a live geometry and scene; the vertex buffer is still the one shared at setup.
+        unsafe {
+            rtcUpdateGeometryBuffer(self.geom, RTC_BUFFER_TYPE_VERTEX, 0);
+            rtcCommitGeometry(self.geom);
+            rtcCommitScene(self.scene);
+        }
+    }
+
+    /// Closest hit: `(t, primitive)`.
+    pub fn intersect1(&self, r: &Ray) -> Option<(f32, u32)> {
+        intersect1(self.scene, r)
+    }
+}
+
+impl Drop for RefitScene<'_> {
+    fn drop(&mut self) {
+        // SAFETY: created by rtcNewGeometry/rtcNewScene, each released once, before the shared
+        // buffers they read (dropped after this).
+        unsafe {
+            rtcReleaseGeometry(self.geom);
+            rtcReleaseScene(self.scene);
+        }
     }
 }
 

@@ -15,10 +15,10 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// Refits the tree to the current positions of its triangles (animated geometry whose
     /// connectivity does not change): every pack is filled again from `tris` (the same
     /// primitive in the same lane) and every child box recomputed from the packs and nodes below
-    /// it, exactly as [`from_bvh2`](Self::from_bvh2) computes them, in one pass over the tree
-    /// with a stack on the call stack (no allocation). The tree's shape, slot order and node
-    /// numbering stay as they were, so its quality (SAH cost) may degrade as triangles move far;
-    /// rebuild then.
+    /// it, exactly as [`from_bvh2`](Self::from_bvh2) computes them: one pass over the packs, one
+    /// over the nodes (with a stack on the call stack; one allocation, a box per pack). The
+    /// tree's shape, slot order and node numbering stay as they were, so its quality (SAH cost)
+    /// may degrade as triangles move far; rebuild then.
     ///
     /// A triangle of the tree whose vertices are no longer all finite, or that `tris` no longer
     /// has (an index past its end, or an indexed mesh whose vertex index is out of range), is
@@ -48,23 +48,16 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// assert!(!bvh8.occluded::<Watertight>(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z)));
     /// ```
     pub fn refit<P: Triangles + ?Sized>(&mut self, tris: &P) -> usize {
-        let mut left_out = 0usize;
-        let packs = &mut self.packs;
-        refit_nodes(&mut self.nodes, |first, count| {
-            let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-            for pack in packs.iter_mut().skip(first).take(count) {
-                let (l, h, out) = refill(pack, tris);
-                (lo, hi, left_out) = (lo.min(l), hi.max(h), left_out + out);
-            }
-            (lo, hi)
-        });
+        let mut boxes = alloc::vec![(Vec3::ZERO, Vec3::ZERO); self.packs.len()];
+        let left_out = refill_all(&mut self.packs, &mut boxes, tris);
+        refit_nodes(&mut self.nodes, &boxes);
         left_out
     }
 
     /// [`refit`](Self::refit) on up to `threads` threads (`std`; at least 1): the packs are
-    /// filled again in `threads` runs side by side (each pack's box kept), then the nodes'
-    /// boxes computed from them on the calling thread. The same tree, bit for bit, as `refit`,
-    /// and the same count of triangles left out.
+    /// filled again in `threads` runs side by side, then the nodes' boxes computed from them on
+    /// the calling thread. The same tree, bit for bit, as `refit`, and the same count of
+    /// triangles left out.
     ///
     /// ```
     /// use strahl::{Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, scene};
@@ -95,34 +88,38 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         let left_out = AtomicUsize::new(0);
         let parts: Vec<_> = self.packs.chunks_mut(per).zip(boxes.chunks_mut(per)).collect();
         crate::par::each_job(parts, runs, |(packs, boxes)| {
-            let mut out = 0;
-            for (pack, b) in packs.iter_mut().zip(boxes.iter_mut()) {
-                let (lo, hi, o) = refill(pack, tris);
-                (*b, out) = ((lo, hi), out + o);
-            }
-            left_out.fetch_add(out, Ordering::Relaxed);
+            left_out.fetch_add(refill_all(packs, boxes, tris), Ordering::Relaxed);
         });
-        refit_nodes(&mut self.nodes, |first, count| {
-            boxes
-                .iter()
-                .skip(first)
-                .take(count)
-                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &(l, h)| {
-                    (lo.min(l), hi.max(h))
-                })
-        });
+        refit_nodes(&mut self.nodes, &boxes);
         left_out.into_inner()
     }
 }
 
-/// Recomputes every child box of `nodes` (the root is `nodes[0]`), a leaf child's from
-/// `leaf(first pack, packs)`, in post-order with a stack on the call stack: a frame per node on
-/// the path from the root, with the next slot to do. A node's child boxes go into its lanes as
-/// they are done; its own box (the union of its lanes) into its parent's lane when all are.
-fn refit_nodes<L: Lane, const N: usize>(
-    nodes: &mut [WideNode<L, N>],
-    mut leaf: impl FnMut(usize, usize) -> (Vec3, Vec3),
-) {
+/// Fills every pack of `packs` again ([`refill`]), its box into `boxes`; returns how many
+/// triangles were left out.
+// PERF: one pass over the packs in memory order, then the nodes from the kept boxes: the 1M
+// sphereflake's BVH8 refit 34.4 -> 30.8 ms (best of 20, by hand) against filling each leaf's
+// packs as the node walk meets them (in the same order, but behind the walk's own work); the
+// same time on a 116k-triangle one. The price: a box per pack (24 bytes) allocated per refit.
+fn refill_all<L: Lane, const N: usize, P: Triangles + ?Sized>(
+    packs: &mut [TriangleLanes<L, N>],
+    boxes: &mut [(Vec3, Vec3)],
+    tris: &P,
+) -> usize {
+    let mut out = 0;
+    for (pack, b) in packs.iter_mut().zip(boxes.iter_mut()) {
+        let (lo, hi, o) = refill(pack, tris);
+        (*b, out) = ((lo, hi), out + o);
+    }
+    out
+}
+
+/// Recomputes every child box of `nodes` (the root is `nodes[0]`), a leaf child's from the boxes
+/// of its packs (`boxes[k]` for pack `k`), in post-order with a stack on the call stack: a frame
+/// per node on the path from the root, with the next slot to do. A node's child boxes go into
+/// its lanes as they are done; its own box (the union of its lanes) into its parent's lane when
+/// all are.
+fn refit_nodes<L: Lane, const N: usize>(nodes: &mut [WideNode<L, N>], boxes: &[(Vec3, Vec3)]) {
     if nodes.is_empty() {
         return;
     }
@@ -147,7 +144,13 @@ fn refit_nodes<L: Lane, const N: usize>(
         }
         if code & LEAF_BIT != 0 {
             let (first, count) = leaf_packs(code);
-            let (lo, hi) = leaf(first, count);
+            let (lo, hi) = boxes
+                .iter()
+                .skip(first)
+                .take(count)
+                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &(l, h)| {
+                    (lo.min(l), hi.max(h))
+                });
             set_box(&mut nodes[node as usize], slot, lo, hi);
             continue;
         }
@@ -165,9 +168,11 @@ fn refit_nodes<L: Lane, const N: usize>(
 /// lanes are those [`TriangleLanes::pack`] makes of the same triangles (a left-out one as an
 /// unused lane: zero and not valid).
 // PERF: written lane by lane here rather than through `TriangleLanes::pack` (a triangle array
-// first): the 1M sphereflake's BVH8 refit 47 -> 39 ms, BVH4 87 -> 75 ms (criterion). Also tried:
-// the child boxes gathered per node in arrays on a stack of frames and loaded into its lanes once
-// (instead of a store and a vector load per lane): no faster, and an allocation.
+// first): the 1M sphereflake's BVH8 refit 47 -> 39 ms, BVH4 87 -> 75 ms (criterion). Tried and
+// dropped (BVH8 of sphereflakes of 12,800 to 1M triangles, best of many, by hand): boxes and the
+// finiteness and degeneracy tests in `Vec3A` (13 -> 20 ns per triangle in cache); asking for the
+// triangles of the packs 4 ahead (`Triangles::prefetch`): 2-10% slower; the lanes made by
+// `Lane::transpose8` of eight-float rows (fewer stores read back as vectors): 2-4% slower.
 #[inline]
 fn refill<L: Lane, const N: usize, P: Triangles + ?Sized>(
     pack: &mut TriangleLanes<L, N>,
@@ -195,7 +200,11 @@ fn refill<L: Lane, const N: usize, P: Triangles + ?Sized>(
             _ => out += 1,
         }
     }
-    pack.v = c.map(|vtx| vtx.map(|axis| L::load(&axis[..N])));
+    for (vtx, lanes) in pack.v.iter_mut().zip(&c) {
+        for (axis, lane) in vtx.iter_mut().zip(lanes) {
+            *axis = L::load(&lane[..N]);
+        }
+    }
     pack.valid = valid;
     (lo, hi, out)
 }
@@ -209,16 +218,14 @@ fn node_box<L: Lane, const N: usize>(node: &WideNode<L, N>) -> (Vec3, Vec3) {
 }
 
 /// Sets child `slot`'s box of `node`.
+// PERF: lanes replaced by a select in registers; writing the lane to memory and loading the
+// vector back (a failed store-to-load forwarding each) took a third of the refit of a
+// 12,800-triangle BVH8 (in cache).
+#[inline]
 fn set_box<L: Lane, const N: usize>(node: &mut WideNode<L, N>, slot: usize, lo: Vec3, hi: Vec3) {
+    let lane = L::from_bitmask(1 << (slot % N));
     for a in 0..3 {
-        set_lane(&mut node.bounds.min[a], slot, lo[a]);
-        set_lane(&mut node.bounds.max[a], slot, hi[a]);
+        node.bounds.min[a] = lane.select(L::splat(lo[a]), node.bounds.min[a]);
+        node.bounds.max[a] = lane.select(L::splat(hi[a]), node.bounds.max[a]);
     }
-}
-
-fn set_lane<L: Lane>(v: &mut L, i: usize, x: f32) {
-    let mut a = [0.0f32; MAX_LANES];
-    v.store(&mut a[..L::N]);
-    a[i & (MAX_LANES - 1)] = x;
-    *v = L::load(&a[..L::N]);
 }
