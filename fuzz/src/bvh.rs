@@ -1,5 +1,5 @@
 //! The `bvh` target: every builder (and the treelet pass), the BVH4/BVH8 collapse, single-ray
-//! traversal of all three trees and 8-ray packets, against brute force.
+//! traversal of all three trees and 8-ray packets, and the BVH8 refit, against brute force.
 //!
 //! Input layout (every byte string decodes; see [`decode`](crate::decode) for values):
 //!
@@ -308,5 +308,69 @@ pub fn check_bvh(case: &BvhCase) {
                 what("bvh8 fast occluded")
             );
         }
+        if params == builders()[0] {
+            check_refit(case, &b2, &b8);
+        }
+    }
+}
+
+/// `Bvh8::refit` to the scene's triangles shifted by one slot (triangle `i` takes triangle
+/// `i + 1`'s place: any motion, non-finite triangles moving into the tree and out of it) and
+/// back: the count of triangles left out, closest and any hits against brute force over the
+/// moved triangles the tree holds (where the moved scene is tame), and the very tree of the
+/// start after moving back.
+fn check_refit(case: &BvhCase, b2: &Bvh2, b8: &Bvh8) {
+    let tris = &case.tris[..];
+    if tris.is_empty() {
+        return;
+    }
+    let moved: Vec<Triangle> = (0..tris.len()).map(|i| tris[(i + 1) % tris.len()]).collect();
+    let finite = |t: &Triangle| t.iter().all(|v| v.is_finite());
+    let mut kept_moved: Vec<Triangle> = vec![[Vec3::NAN; 3]; tris.len()];
+    let mut want_out = 0;
+    for &p in &b2.prim_indices {
+        let t = moved[p as usize];
+        if finite(&t) {
+            kept_moved[p as usize] = t;
+        } else {
+            want_out += 1;
+        }
+    }
+    let mut r8 = b8.clone();
+    assert_eq!(r8.refit(&moved[..]), want_out, "refit: triangles left out");
+    let tame = |v: Vec3| {
+        v.to_array()
+            .iter()
+            .all(|x| *x == 0.0 || (TAME_MIN..=TAME).contains(&x.abs()))
+    };
+    let scene_tame = case.mode == Mode::Grid
+        || kept_moved
+            .iter()
+            .filter(|t| finite(t))
+            .all(|t| t.iter().all(|&v| tame(v)));
+    for (i, ray) in case.rays.iter().enumerate() {
+        if !(scene_tame && (case.mode == Mode::Grid || (tame(ray.origin) && tame(ray.direction)))) {
+            continue;
+        }
+        let want = strahl::traverse::intersect_brute_force::<Watertight, _>(&kept_moved[..], ray);
+        agrees(
+            &kept_moved,
+            ray,
+            r8.intersect::<Watertight>(ray),
+            want,
+            &format!("refit ray {i}"),
+        );
+        let occ = strahl::traverse::occluded_brute_force::<Watertight, _>(&kept_moved[..], ray);
+        assert_eq!(r8.occluded::<Watertight>(ray), occ, "refit ray {i} occluded");
+    }
+    // Back to the start: the tree of the collapse again, answer for answer.
+    assert_eq!(r8.refit(tris), 0, "refit back: every triangle of the tree is valid");
+    for ray in &case.rays {
+        let (a, b) = (r8.intersect::<Watertight>(ray), b8.intersect::<Watertight>(ray));
+        assert_eq!(
+            a.map(|h| (h.t.to_bits(), h.prim)),
+            b.map(|h| (h.t.to_bits(), h.prim)),
+            "refit back"
+        );
     }
 }
