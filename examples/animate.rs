@@ -6,7 +6,7 @@
 //!
 //! ```sh
 //! cargo run --release --example animate            # the bunny
-//! cargo run --release --example animate -- flake   # a 29k-triangle sphereflake
+//! cargo run --release --example animate -- flake   # a 12,800-triangle sphereflake
 //! ```
 
 use std::time::Instant;

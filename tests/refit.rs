@@ -15,17 +15,19 @@ use strahl::scene::{self, Rng};
 use strahl::traverse::{Moller, Watertight, intersect_brute_force, occluded_brute_force};
 use strahl::{Ray, Vec3};
 
-/// Every word of two trees, lane by lane (`to_bits`), the same.
+/// Every word of two trees, lane by lane (`to_bits`), the same; a box edge of `-0.0` counts as
+/// `+0.0` (the collapse and the refit may take a zero's sign from different triangles).
 fn identical<L: Lane, const N: usize>(a: &BvhWide<L, N>, b: &BvhWide<L, N>) -> bool {
     let lanes = |v: &L| (0..N).map(|i| v.lane(i).to_bits()).collect::<Vec<_>>();
+    let edges = |v: &L| (0..N).map(|i| (v.lane(i) + 0.0).to_bits()).collect::<Vec<_>>();
     a.depth() == b.depth()
         && a.nodes().len() == b.nodes().len()
         && a.packs().len() == b.packs().len()
         && a.nodes().iter().zip(b.nodes()).all(|(x, y)| {
             x.child == y.child
                 && (0..3).all(|k| {
-                    lanes(&x.bounds.min[k]) == lanes(&y.bounds.min[k])
-                        && lanes(&x.bounds.max[k]) == lanes(&y.bounds.max[k])
+                    edges(&x.bounds.min[k]) == edges(&y.bounds.min[k])
+                        && edges(&x.bounds.max[k]) == edges(&y.bounds.max[k])
                 })
         })
         && a.packs().iter().zip(b.packs()).all(|(x, y)| {
@@ -223,7 +225,22 @@ fn refits_are_exact_in_every_width() {
             })
             .collect::<Vec<Triangle>>()
     };
-    for (name, tris) in [("sphereflake", &flake), ("soup", &soup)] {
+    // Large enough that `from_bvh2_par(.., 2)` splits the work (and numbers the nodes its own way).
+    let thin = scene::thin_soup(20_000, 3);
+    // Box edges at -0.0 and +0.0 side by side.
+    let zeros: Vec<Triangle> = (0..64)
+        .map(|i| {
+            let z = if i % 2 == 0 { -0.0 } else { 0.0 };
+            let y = (i / 2) as f32;
+            [Vec3::new(z, y, z), Vec3::new(1.0, y, z), Vec3::new(z, y + 1.0, 1.0)]
+        })
+        .collect();
+    for (name, tris) in [
+        ("sphereflake", &flake),
+        ("soup", &soup),
+        ("thin soup", &thin),
+        ("signed zeros", &zeros),
+    ] {
         check_width::<f32x4, 4>(tris, name);
         check_width::<f32x8, 8>(tris, name);
     }
@@ -282,7 +299,7 @@ fn an_empty_tree_refits_to_nothing() {
 fn threaded_refits_equal_the_single_threaded_one() {
     fn check<L: Lane + Send, const N: usize>(tris: &[Triangle]) {
         let (b2, _) = Bvh2::build(tris, &BuildParams::default()).unwrap();
-        let tree = BvhWide::<L, N>::from_bvh2(&b2, tris).unwrap();
+        let tree = BvhWide::<L, N>::from_bvh2_par(&b2, tris, 2).unwrap();
         assert!(
             tree.packs().len() >= 4 * 1024,
             "{} packs: too few to split",

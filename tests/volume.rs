@@ -1368,3 +1368,34 @@ fn refused_jumps_and_nan_extinction_through_adversarial_media() {
         }
     }
 }
+
+/// An axis of 2^24 + 4 voxels: `dims - 1 = 16777219` rounds up to 16777220 in `f32`, so the box
+/// reaches past the last voxel. The clamp to the edge there must read the last voxel (the cell's
+/// fraction is capped at 1), not extrapolate (200 from voxels 0 and 100, which once made the
+/// marcher see what the grid had classified empty, so skipping changed the image).
+#[test]
+fn long_axis_clamp_reads_the_last_voxel() {
+    let d = (1u32 << 24) + 4;
+    let mut data = vec![0u8; d as usize];
+    data[d as usize - 1] = 100;
+    let vol = Volume::new(&data, [d, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+    assert_eq!(vol.sample_local_scalar(Vec3::new(1.0e9, 0.0, 0.0)), 100.0);
+    assert_eq!(vol.sample_local_scalar(vol.bounds().max), 100.0);
+    let far = [Vec3::new(1.0e9, 0.0, 0.0); 8];
+    let x8 = vol.sample_local_x8([0, 1, 2].map(|a| strahl::math::f32x8::from(far.map(|p| p[a]))));
+    assert_eq!(x8.to_array(), [100.0; 8]);
+    // No voxel exceeds 100, so the table is transparent everywhere the volume's values reach.
+    let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 50.0)];
+    let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    let mut grid = MacrocellGrid::build(&vol, GridParams { block: 64 }).unwrap();
+    grid.classify(&tf);
+    let rays = [Ray::new(Vec3::new(16_777_200.0, 0.0, 0.0), Vec3::X)];
+    let p = MarchParams::reference(0.25);
+    let plain = both(&VolumeMedium::new(vol, tf), &rays, &p).0[0];
+    let skipping = both(&VolumeMedium::new(vol, tf).with_grid(&grid).unwrap(), &rays, &p).0[0];
+    assert!(
+        plain.bit_eq(&skipping),
+        "grid changed the image: {plain:?} vs {skipping:?}"
+    );
+    assert_eq!(plain.a, 0.0, "no voxel is visible through this table");
+}

@@ -399,7 +399,8 @@ impl<'d> RefitScene<'d> {
                 RTC_BUFFER_TYPE_VERTEX,
                 0,
                 RTC_FORMAT_FLOAT3,
-                vertices.as_ptr().cast(),
+                // A mutable pointer: the buffer is written in place by `update` between commits.
+                vertices.as_mut_ptr().cast(),
                 0,
                 12,
                 tris.len() * 3,

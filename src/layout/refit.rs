@@ -15,7 +15,8 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// Refits the tree to the current positions of its triangles (animated geometry whose
     /// connectivity does not change): every pack is filled again from `tris` (the same
     /// primitive in the same lane) and every child box recomputed from the packs and nodes below
-    /// it, exactly as [`from_bvh2`](Self::from_bvh2) computes them: one pass over the packs, one
+    /// it, the values [`from_bvh2`](Self::from_bvh2) computes (a box edge at zero may come out as
+    /// `-0.0` where the collapse had `+0.0` or back; they compare equal): one pass over the packs, one
     /// over the nodes (with a stack on the call stack; one allocation, a box per pack). The
     /// tree's shape, slot order and node numbering stay as they were, so its quality (SAH cost)
     /// may degrade as triangles move far; rebuild then.
@@ -28,7 +29,7 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// Triangles that were invalid when the tree was built are not in it: rebuild to add them.
     ///
     /// Traversal after a refit gives exactly the closest hits of brute force over the tree's
-    /// triangles in their new places (`tests/wide.rs`).
+    /// triangles in their new places (`tests/refit.rs`).
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, scene, traverse::Watertight};

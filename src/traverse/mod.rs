@@ -125,6 +125,12 @@ pub trait TriangleTest {
 }
 
 /// Möller-Trumbore ([`moller::intersect_scalar`]): fast, not watertight.
+///
+/// On edges and grazing rays its rounding can report a hit just outside the triangle (by less
+/// than an ulp of the coordinates), or an ill-conditioned `t` on a ray almost parallel to the
+/// triangle's plane. Such a hit can lie outside the triangle's box, so brute force may report it
+/// while a BVH traversal, which never opens that box, does not. Use [`Watertight`] where every
+/// traversal must agree with brute force on such rays (`tests/packet_edges.rs` shows both cases).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Moller;
 

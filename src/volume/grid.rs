@@ -546,7 +546,8 @@ impl<'a, V: Voxel> Volume<'a, V> {
     }
 
     /// Trilinear sample at local coordinates `g` (clamped to `[0, dims - 1]`); `0` for an empty
-    /// volume.
+    /// volume. Interpolated in `f32` as `a + (b - a) t`: where two neighbouring voxels differ by more
+    /// than `f32::MAX` (values beyond about `±1.7e38`) the sample is infinite.
     #[inline]
     pub fn sample_local_scalar(&self, g: Vec3) -> f32 {
         if self.data.is_empty() {
@@ -588,7 +589,9 @@ impl<'a, V: Voxel> Volume<'a, V> {
             let gc = min_l(max_l(g[a], 0.0), self.gmax[a]);
             let i = (gc as i32).min(self.cmax[a]);
             idx[a] = i;
-            frac[a] = gc - i as f32;
+            // At most 1: on an axis of more than 2^24 voxels `gmax` rounds up past the last voxel,
+            // and the clamp to the edge must read that voxel, not extrapolate beyond it.
+            frac[a] = min_l(gc - i as f32, 1.0);
         }
         let base = idx[0] + idx[1] * self.stride[1] + idx[2] * self.stride[2];
         Cell {
@@ -610,7 +613,7 @@ impl<'a, V: Voxel> Volume<'a, V> {
             // NOTE: the saturating form: on an axis of 2^31 - 63 voxels or more `gmax` rounds up to
             // 2^31, where the untrapped conversion gives `i32::MIN` (found in review).
             let i = gc.trunc_int().min(i32x8::splat(self.cmax[a]));
-            frac[a] = gc - i.round_float();
+            frac[a] = (gc - i.round_float()).min_l(f32x8::splat(1.0));
             base += i * i32x8::splat(self.stride[a]);
             idx[a] = i.to_array();
         }

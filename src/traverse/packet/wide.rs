@@ -731,14 +731,25 @@ impl Interval {
     }
 }
 
-/// Lower and upper bounds of `[a0, a1] * [b0, b1]` per lane (NaN products, from `0 * inf`, are
-/// dropped: the bound then ignores that corner, which only widens nothing it must keep since the
-/// other corners are infinite).
+/// Lower bound of `[a0, a1] * [b0, b1]` per lane. A NaN product (`0 * inf`: a lane's origin on
+/// the plane with a zero direction component) counts as `-inf`, so the bound stays conservative:
+/// left as NaN it would drop the other corners from the `min` chain and cull a box some lane enters.
 #[inline(always)]
-fn product_bounds<L: Lane>(a0: L, a1: L, b0: f32, b1: f32) -> (L, L) {
+fn product_lo<L: Lane>(a0: L, a1: L, b0: f32, b1: f32) -> L {
     let (b0, b1) = (L::splat(b0), L::splat(b1));
-    let (p0, p1, p2, p3) = (a0 * b0, a0 * b1, a1 * b0, a1 * b1);
-    (p0.min_l(p1).min_l(p2).min_l(p3), p0.max_l(p1).max_l(p2).max_l(p3))
+    let ninf = L::splat(f32::NEG_INFINITY);
+    let fix = |p: L| p.eq(p).select(p, ninf);
+    fix(a0 * b0).min_l(fix(a0 * b1)).min_l(fix(a1 * b0)).min_l(fix(a1 * b1))
+}
+
+/// Upper bound of `[a0, a1] * [b0, b1]` per lane, NaN products counted as `+inf` (see
+/// [`product_lo`]).
+#[inline(always)]
+fn product_hi<L: Lane>(a0: L, a1: L, b0: f32, b1: f32) -> L {
+    let (b0, b1) = (L::splat(b0), L::splat(b1));
+    let inf = L::splat(f32::INFINITY);
+    let fix = |p: L| p.eq(p).select(p, inf);
+    fix(a0 * b0).max_l(fix(a0 * b1)).max_l(fix(a1 * b0)).max_l(fix(a1 * b1))
 }
 
 /// Coherent packets: children are culled against the packet's interval (Wald, Boulos and Shirley
@@ -818,8 +829,8 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                         (node.bounds.min[a], node.bounds.max[a])
                     };
                     let (o0, o1) = (L::splat(iv.o[a].0), L::splat(iv.o[a].1));
-                    let (n_lo, _) = product_bounds(entry - o1, entry - o0, iv.inv[a].0, iv.inv[a].1);
-                    let (_, f_hi) = product_bounds(exit - o1, exit - o0, iv.inv[a].0, iv.inv[a].1);
+                    let n_lo = product_lo(entry - o1, entry - o0, iv.inv[a].0, iv.inv[a].1);
+                    let f_hi = product_hi(exit - o1, exit - o0, iv.inv[a].0, iv.inv[a].1);
                     near = n_lo.max_l(near);
                     far = f_hi.min_l(far);
                 }
