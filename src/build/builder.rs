@@ -104,11 +104,32 @@ pub(crate) struct Counters {
 
 impl Builder {
     /// A builder without memory yet (it grows on the first build and is kept).
+    ///
+    /// ```
+    /// use strahl::build::{Builder, BuildParams, Bvh2};
+    /// let tris = strahl::scene::icosphere(1).to_soup();
+    /// let (mine, _) = Builder::new().build(&tris[..], &BuildParams::default()).unwrap();
+    /// let (once, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// assert_eq!(mine, once); // `Bvh2::build` is a one-off builder: the same tree
+    /// ```
     pub fn new() -> Self {
         Self::default()
     }
 
     /// Builds a tree over `prims` (see [`Bvh2::build`]).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Builder, BuildParams}, traverse::{Watertight, intersect_brute_force}};
+    /// let mut builder = Builder::new(); // one builder, scenes of several sizes
+    /// for n in [1, 3] {
+    ///     let tris = strahl::scene::icosphere(n).to_soup();
+    ///     let (bvh, stats) = builder.build(&tris[..], &BuildParams::fast()).unwrap();
+    ///     assert_eq!(stats.primitives as usize, tris.len());
+    ///     let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+    ///     let brute = intersect_brute_force::<Watertight, _>(&tris[..], &ray);
+    ///     assert_eq!(bvh.intersect::<Watertight, _>(&tris[..], &ray), brute);
+    /// }
+    /// ```
     pub fn build<P: Primitives + ?Sized>(
         &mut self,
         prims: &P,
@@ -121,6 +142,18 @@ impl Builder {
 
     /// Builds a tree over `prims` into `out`, replacing its contents and reusing its memory.
     /// On error `out` is left unchanged.
+    ///
+    /// ```
+    /// use strahl::build::{Builder, BuildParams, Bvh2};
+    /// let tris = strahl::scene::icosphere(1).to_soup();
+    /// let (mut builder, mut bvh) = (Builder::new(), Bvh2::default());
+    /// let stats = builder.build_into(&tris[..], &BuildParams::default(), &mut bvh).unwrap();
+    /// assert_eq!(stats.nodes as usize, bvh.nodes.len());
+    /// let before = bvh.clone();
+    /// let bad = BuildParams { bins: 2, ..BuildParams::default() };
+    /// assert!(builder.build_into(&tris[..], &bad, &mut bvh).is_err());
+    /// assert_eq!(bvh, before); // the failed build left the tree alone
+    /// ```
     pub fn build_into<P: Primitives + ?Sized>(
         &mut self,
         prims: &P,

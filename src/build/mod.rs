@@ -39,8 +39,9 @@
 //! for them every frame.
 //!
 //! # Guarantees
-//! - **Bad primitives** (non-finite vertices, boxes whose extent overflows `f32`, indices out of
-//!   range) are left out and counted in [`BuildStats::invalid`]; the root box is finite.
+//! - **Bad primitives** (non-finite vertices, boxes whose extent or `min + max` overflows `f32`,
+//!   i.e. coordinates beyond about `±1.7e38`, indices out of range) are left out and counted in
+//!   [`BuildStats::invalid`]; the root box is finite.
 //!   Zero-area triangles are kept (the ray kernels never hit them).
 //! - **Empty input** gives an empty, valid tree (no nodes); a single primitive gives one leaf.
 //! - **Termination.** Every split leaves both sides non-empty. Where the centroids of a node all
@@ -346,6 +347,16 @@ pub struct Bvh2 {
 }
 
 /// What a build did.
+///
+/// ```
+/// use strahl::{Vec3, build::{Bvh2, BuildParams}};
+/// let mut tris = strahl::scene::icosphere(2).to_soup();
+/// tris.push([Vec3::ZERO, Vec3::X, Vec3::INFINITY]); // not finite: left out
+/// let (bvh, stats) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// assert_eq!((stats.primitives, stats.invalid), (320, 1));
+/// let check = bvh.validate(&tris[..]).unwrap();
+/// assert_eq!((stats.nodes, stats.leaves, stats.max_depth), (check.nodes, check.leaves, check.max_depth));
+/// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct BuildStats {
     /// Primitives in the tree (the valid ones).
@@ -366,6 +377,15 @@ pub struct BuildStats {
 }
 
 /// Why a build could not run.
+///
+/// ```
+/// use strahl::{Vec3, build::{Bvh2, BuildError, BuildParams, MIN_DEPTH}};
+/// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
+/// let shallow = BuildParams { max_depth: MIN_DEPTH - 1, ..BuildParams::default() };
+/// let err = Bvh2::build(&tris[..], &shallow).unwrap_err();
+/// assert!(matches!(err, BuildError::InvalidParams(_)));
+/// assert!(err.to_string().starts_with("invalid build parameters"));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BuildError {
     /// More primitives than [`MAX_PRIMITIVES`] (node indices would not fit in `u32`).
@@ -432,18 +452,44 @@ impl Bvh2 {
     }
 
     /// A borrowed view for the [`traverse`](crate::traverse) functions.
+    ///
+    /// ```
+    /// # use strahl::build::{Bvh2, BuildParams};
+    /// # let tris = strahl::scene::icosphere(1).to_soup();
+    /// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let view = bvh.view();
+    /// assert_eq!((view.nodes, view.prim_indices), (&bvh.nodes[..], &bvh.prim_indices[..]));
+    /// assert_eq!(view.bounds(), bvh.bounds());
+    /// ```
     #[inline]
     pub fn view(&self) -> Bvh2Ref<'_> {
         Bvh2Ref::new(&self.nodes, &self.prim_indices)
     }
 
     /// `true` if the tree has no nodes.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3, build::{Bvh2, BuildParams}};
+    /// let (empty, _) = Bvh2::build(&[] as &[Aabb], &BuildParams::default()).unwrap();
+    /// assert!(empty.is_empty());
+    /// // Invalid primitives are left out: a tree of nothing but those is empty too.
+    /// let (none_valid, _) = Bvh2::build(&[[Vec3::ZERO, Vec3::X, Vec3::NAN]][..], &BuildParams::default()).unwrap();
+    /// assert!(none_valid.is_empty());
+    /// ```
     #[inline]
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()
     }
 
     /// The root's box ([`Aabb::EMPTY`] for an empty tree).
+    ///
+    /// ```
+    /// use strahl::{Aabb, build::{Bvh2, BuildParams}};
+    /// let mesh = strahl::scene::icosphere(2);
+    /// let (bvh, _) = Bvh2::build(&mesh.as_indexed(), &BuildParams::default()).unwrap();
+    /// assert_eq!(bvh.bounds(), Aabb::from_points(&mesh.positions));
+    /// assert_eq!(Bvh2::default().bounds(), Aabb::EMPTY);
+    /// ```
     #[inline]
     pub fn bounds(&self) -> Aabb {
         self.view().bounds()
@@ -451,12 +497,32 @@ impl Bvh2 {
 
     /// Closest hit of `ray` among `tris` through this tree, with the triangle test `T`
     /// ([`traverse::intersect_scalar`](crate::traverse::intersect_scalar)).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, traverse::{Watertight, intersect_brute_force}};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -4.0), Vec3::Z);
+    /// let hit = bvh.intersect::<Watertight, _>(&tris[..], &ray).unwrap();
+    /// assert_eq!(Some(hit), intersect_brute_force::<Watertight, _>(&tris[..], &ray));
+    /// assert!(hit.t > 3.0 && hit.t < 3.1); // the unit sphere's near side, just inside z = -1
+    /// ```
     #[inline]
     pub fn intersect<T: TriangleTest, P: Triangles + ?Sized>(&self, tris: &P, ray: &Ray) -> Option<Hit> {
         intersect_scalar::<T, P>(self.view(), tris, ray)
     }
 
     /// `true` if `ray` hits anything ([`traverse::occluded_scalar`](crate::traverse::occluded_scalar)).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, traverse::Watertight};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let o = Vec3::new(0.1, 0.2, -4.0);
+    /// assert!(bvh.occluded::<Watertight, _>(&tris[..], &Ray::new(o, Vec3::Z)));
+    /// // A shadow ray that ends before the sphere (at t = 2.5) is not blocked.
+    /// assert!(!bvh.occluded::<Watertight, _>(&tris[..], &Ray::with_range(o, Vec3::Z, 0.0, 2.5)));
+    /// ```
     #[inline]
     pub fn occluded<T: TriangleTest, P: Triangles + ?Sized>(&self, tris: &P, ray: &Ray) -> bool {
         occluded_scalar::<T, P>(self.view(), tris, ray)

@@ -4,6 +4,20 @@ use super::BuildError;
 use crate::traverse::MAX_DEPTH;
 
 /// How the builder chooses splits.
+///
+/// ```
+/// use strahl::build::{BuildParams, Bvh2, Strategy::*};
+/// let tris = strahl::scene::icosphere(3).to_soup();
+/// let cost = |strategy| {
+///     let (bvh, _) = Bvh2::build(&tris[..], &BuildParams { strategy, ..BuildParams::default() }).unwrap();
+///     assert!(bvh.validate(&tris[..]).is_ok());
+///     bvh.sah_cost(1.0, 1.0)
+/// };
+/// let sweep = cost(SweepSah);
+/// for s in [Median, BinnedSah, Lbvh, Hlbvh, HlbvhSah, Ploc] {
+///     assert!(sweep <= cost(s)); // the full sweep is the reference
+/// }
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Strategy {
     /// Top-down, object median on the longest axis of the centroid bounds: half the primitives
@@ -50,6 +64,17 @@ pub enum Strategy {
 }
 
 /// A pass that improves a finished tree, after any [`Strategy`] ([`BuildParams::refine`]).
+///
+/// ```
+/// use strahl::build::{BuildParams, Bvh2, Refine};
+/// let tris = strahl::scene::thin_soup(5_000, 1);
+/// let p = BuildParams::fastest();
+/// let (plain, _) = Bvh2::build(&tris[..], &p).unwrap();
+/// let (rotated, stats) = Bvh2::build(&tris[..], &BuildParams { refine: Refine::Rotations(2), ..p }).unwrap();
+/// assert!(stats.restructured > 0);
+/// assert!(rotated.sah_cost(1.0, 1.0) <= plain.sah_cost(1.0, 1.0)); // never worse by the SAH
+/// assert!(BuildParams { refine: Refine::Rotations(0), ..p }.check().is_err()); // rounds: 1 ..= 64
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Refine {
     /// No pass: the tree as the strategy built it.
@@ -93,6 +118,14 @@ pub struct TreeletParams {
 
 impl TreeletParams {
     /// The default: 7 leaves, every node with at least 2 primitives, one round.
+    ///
+    /// ```
+    /// use strahl::build::{BuildParams, Refine, TreeletParams};
+    /// const T: TreeletParams = TreeletParams::new(); // usable in constants
+    /// assert_eq!((T.leaves, T.min_prims, T.rounds), (7, 2, 1));
+    /// assert_eq!(T, TreeletParams::default());
+    /// assert!(BuildParams { refine: Refine::Treelets(T), ..BuildParams::default() }.check().is_ok());
+    /// ```
     pub const fn new() -> Self {
         Self {
             leaves: 7,
@@ -110,6 +143,18 @@ impl Default for TreeletParams {
 }
 
 /// Which axes [`Strategy::BinnedSah`] bins.
+///
+/// ```
+/// use strahl::build::{BinAxes, BuildParams, Bvh2};
+/// assert_eq!(BuildParams::fast().bin_axes, BinAxes::Longest);
+/// assert_eq!(BuildParams::balanced().bin_axes, BinAxes::All);
+/// assert_eq!(BuildParams::hybrid_sah().bin_axes, BinAxes::AllButSmall);
+/// let tris = strahl::scene::thin_soup(2_000, 3);
+/// for bin_axes in [BinAxes::All, BinAxes::Longest, BinAxes::AllButSmall] {
+///     let (bvh, _) = Bvh2::build(&tris[..], &BuildParams { bin_axes, ..BuildParams::fast() }).unwrap();
+///     assert!(bvh.validate(&tris[..]).is_ok());
+/// }
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BinAxes {
     /// All three: the best plane of `3 (bins - 1)` candidates.
@@ -124,6 +169,21 @@ pub enum BinAxes {
 }
 
 /// Bits of the Morton codes an [`Lbvh`](Strategy::Lbvh) build sorts by.
+///
+/// ```
+/// use strahl::{Vec3, build::{BuildParams, Bvh2, MortonBits}};
+/// // 1,000 small triangles in a unit cube, and one 1,000 away: one 30-bit cell holds the cube.
+/// # let mut rng = strahl::scene::Rng::new(1);
+/// let mut tris: Vec<_> = (0..1000).map(|_| {
+///     let p = Vec3::new(rng.f32(), rng.f32(), rng.f32());
+///     [p, p + Vec3::X * 1e-3, p + Vec3::Y * 1e-3]
+/// }).collect();
+/// tris.push([Vec3::splat(1e3), Vec3::splat(1e3) + Vec3::X, Vec3::splat(1e3) + Vec3::Y]);
+/// let p = BuildParams::fastest();
+/// assert_eq!(p.morton_bits, MortonBits::Bits30);
+/// let leaves = |morton_bits| Bvh2::build(&tris[..], &BuildParams { morton_bits, ..p }).unwrap().1.leaves;
+/// assert!(leaves(MortonBits::Bits63) > leaves(MortonBits::Bits30)); // equal codes: leaves of up to 4
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum MortonBits {
     /// 30-bit codes, 10 bits (1,024 cells) per axis: fewer radix passes (3), coarser cells.
@@ -242,12 +302,46 @@ pub struct BuildParams {
 pub const MAX_CLUSTER_SIZE: u32 = 1 << 16;
 
 /// Fewest bins per axis of the binned builder.
+///
+/// ```
+/// use strahl::build::{BuildParams, MIN_BINS};
+/// let p = BuildParams { bins: MIN_BINS, ..BuildParams::fast() };
+/// assert!(p.check().is_ok());
+/// assert!(BuildParams { bins: MIN_BINS - 1, ..p }.check().is_err());
+/// ```
 pub const MIN_BINS: u32 = 4;
 /// Most bins per axis of the binned builder (the bins are fixed arrays of this size).
+///
+/// ```
+/// use strahl::build::{BuildParams, Bvh2, MAX_BINS};
+/// let p = BuildParams { bins: MAX_BINS, ..BuildParams::fast() };
+/// assert!(BuildParams { bins: MAX_BINS + 1, ..p }.check().is_err());
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// assert!(Bvh2::build(&tris[..], &p).unwrap().0.validate(&tris[..]).is_ok());
+/// ```
 pub const MAX_BINS: u32 = 64;
 /// Largest accepted [`BuildParams::max_leaf_size`].
+///
+/// ```
+/// use strahl::build::{BuildParams, Bvh2, MAX_LEAF_SIZE};
+/// let p = BuildParams { max_leaf_size: MAX_LEAF_SIZE, ..BuildParams::median() };
+/// assert!(p.check().is_ok());
+/// assert!(BuildParams { max_leaf_size: MAX_LEAF_SIZE + 1, ..p }.check().is_err());
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// // Leaves as large as the SAH likes: at most all 320 triangles.
+/// assert!(Bvh2::build(&tris[..], &p).unwrap().0.validate(&tris[..]).unwrap().max_leaf_size <= 320);
+/// ```
 pub const MAX_LEAF_SIZE: u32 = 1 << 16;
 /// Smallest accepted [`BuildParams::max_depth`].
+///
+/// ```
+/// use strahl::build::{BuildParams, Bvh2, MIN_DEPTH};
+/// let p = BuildParams { max_depth: MIN_DEPTH, ..BuildParams::fastest() };
+/// assert!(p.check().is_ok());
+/// assert!(BuildParams { max_depth: MIN_DEPTH - 1, ..p }.check().is_err());
+/// let tris = strahl::scene::thin_soup(10_000, 1);
+/// assert!(Bvh2::build(&tris[..], &p).unwrap().0.validate(&tris[..]).unwrap().max_depth <= MIN_DEPTH);
+/// ```
 pub const MIN_DEPTH: u32 = 34;
 
 impl Default for BuildParams {
@@ -274,6 +368,16 @@ impl BuildParams {
     /// The fastest build: LBVH over 30-bit Morton codes, leaves of up to 2 primitives (up to 4
     /// where codes coincide). Measured: two-primitive leaves build about 20% faster than Karras'
     /// single-primitive ones, with an SAH cost within 2% either way.
+    ///
+    /// ```
+    /// use strahl::build::{BuildParams, Bvh2, MortonBits, Strategy};
+    /// let p = BuildParams::fastest();
+    /// assert_eq!((p.strategy, p.morton_bits), (Strategy::Lbvh, MortonBits::Bits30));
+    /// assert_eq!((p.min_leaf_size, p.max_leaf_size), (2, 4));
+    /// assert!(p.check().is_ok());
+    /// let tris = strahl::scene::thin_soup(1_000, 1);
+    /// assert!(Bvh2::build(&tris[..], &p).unwrap().0.validate(&tris[..]).unwrap().max_leaf_size <= 4);
+    /// ```
     pub const fn fastest() -> Self {
         Self {
             strategy: Strategy::Lbvh,
@@ -293,6 +397,16 @@ impl BuildParams {
 
     /// A fast build of a good tree: binned SAH with 8 bins on the longest centroid axis
     /// (Wald 2007).
+    ///
+    /// ```
+    /// use strahl::build::{BinAxes, BuildParams, Bvh2, Strategy};
+    /// let p = BuildParams::fast();
+    /// assert_eq!((p.strategy, p.bins, p.bin_axes), (Strategy::BinnedSah, 8, BinAxes::Longest));
+    /// assert_eq!((p.min_leaf_size, p.max_leaf_size), (1, 8));
+    /// assert!(p.check().is_ok());
+    /// let tris = strahl::scene::thin_soup(1_000, 1);
+    /// assert!(Bvh2::build(&tris[..], &p).unwrap().0.validate(&tris[..]).unwrap().max_leaf_size <= 8);
+    /// ```
     pub const fn fast() -> Self {
         Self {
             strategy: Strategy::BinnedSah,
@@ -305,6 +419,14 @@ impl BuildParams {
     }
 
     /// The default: binned SAH with 16 bins on all three axes.
+    ///
+    /// ```
+    /// use strahl::build::{BinAxes, BuildParams, Strategy};
+    /// let p = BuildParams::balanced();
+    /// assert_eq!((p.strategy, p.bins, p.bin_axes), (Strategy::BinnedSah, 16, BinAxes::All));
+    /// assert_eq!(p, BuildParams::default());
+    /// assert!(p.check().is_ok());
+    /// ```
     pub const fn balanced() -> Self {
         Self {
             bins: 16,
@@ -345,6 +467,17 @@ impl BuildParams {
     /// The best tree of a single greedy top-down pass: full-sweep SAH over every primitive
     /// boundary on all three axes (the exact SAH split at every node, the reference the other
     /// presets are measured against; [`high`](Self::high) refines a binned tree past it).
+    ///
+    /// ```
+    /// use strahl::build::{BuildParams, Bvh2, Strategy};
+    /// let p = BuildParams::quality();
+    /// assert_eq!(p.strategy, Strategy::SweepSah);
+    /// assert!(p.check().is_ok());
+    /// let tris = strahl::scene::thin_soup(5_000, 1);
+    /// let (best, _) = Bvh2::build(&tris[..], &p).unwrap();
+    /// let (binned, _) = Bvh2::build(&tris[..], &BuildParams::fast()).unwrap();
+    /// assert!(best.sah_cost(1.0, 1.0) <= binned.sah_cost(1.0, 1.0));
+    /// ```
     pub const fn quality() -> Self {
         Self {
             strategy: Strategy::SweepSah,
@@ -353,6 +486,17 @@ impl BuildParams {
     }
 
     /// The SAH-blind baseline: object median on the longest centroid axis, leaves of up to 4.
+    ///
+    /// ```
+    /// use strahl::build::{BuildParams, Bvh2, Strategy};
+    /// let p = BuildParams::median();
+    /// assert_eq!((p.strategy, p.max_leaf_size), (Strategy::Median, 4));
+    /// assert!(p.check().is_ok());
+    /// let tris = strahl::scene::thin_soup(1_000, 1);
+    /// let stats = Bvh2::build(&tris[..], &p).unwrap().0.validate(&tris[..]).unwrap();
+    /// assert!(stats.max_leaf_size <= 4);
+    /// assert!(stats.max_depth <= 11); // object medians: a balanced tree, at most ceil(log2 1000) + 1 deep
+    /// ```
     pub const fn median() -> Self {
         Self {
             strategy: Strategy::Median,
@@ -453,6 +597,15 @@ impl BuildParams {
 
     /// `Ok` if every field is in its documented range, else [`BuildError::InvalidParams`] naming
     /// the first field that is not. The builders call this first.
+    ///
+    /// ```
+    /// use strahl::build::{BuildError, BuildParams};
+    /// assert!(BuildParams::default().check().is_ok());
+    /// let bad = BuildParams { min_leaf_size: 4, max_leaf_size: 2, ..BuildParams::default() };
+    /// let Err(BuildError::InvalidParams(why)) = bad.check() else { panic!("accepted") };
+    /// assert!(why.starts_with("max_leaf_size"));
+    /// assert!(BuildParams { traversal_cost: f32::NAN, ..BuildParams::default() }.check().is_err());
+    /// ```
     pub fn check(&self) -> Result<(), BuildError> {
         let bad = |what| Err(BuildError::InvalidParams(what));
         if !(self.traversal_cost.is_finite() && self.traversal_cost >= 0.0) {

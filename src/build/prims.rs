@@ -13,7 +13,9 @@ use glam::{Vec3, Vec3A};
 /// `[Triangle]`) and for `[Aabb]` (any primitive type, as boxes). A primitive whose box is
 /// `None` (a triangle with a non-finite vertex or an index out of range) is **invalid**: the
 /// builders leave it out and count it in [`BuildStats::invalid`](super::BuildStats::invalid).
-/// Boxes that are empty, not finite, or whose extent or centre overflows `f32` are invalid too.
+/// Boxes that are empty, not finite, or whose extent or doubled centre `min + max` overflows `f32`
+/// are invalid too: so a primitive with a coordinate beyond about `±1.7e38` (`f32::MAX / 2`) is
+/// left out and counted (brute force over the triangles may still hit it; the trees never do).
 /// A primitive's centroid, for splitting and Morton codes, is the centre of its box.
 ///
 /// ```
@@ -27,8 +29,23 @@ use glam::{Vec3, Vec3A};
 /// ```
 pub trait Primitives {
     /// Number of primitives, valid or not.
+    ///
+    /// ```
+    /// use strahl::{build::Primitives, scene};
+    /// let mesh = scene::icosphere(1); // 80 triangles
+    /// assert_eq!(mesh.as_indexed().prim_count(), 80);
+    /// assert_eq!(mesh.to_soup()[..].prim_count(), mesh.as_indexed().prim_count());
+    /// ```
     fn prim_count(&self) -> usize;
     /// Primitive `i`'s bounding box, or `None` if it is invalid or `i` is out of range.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3, build::Primitives};
+    /// let tris = [[Vec3::ZERO, Vec3::new(2.0, 0.0, -1.0), Vec3::Y]];
+    /// let b = Aabb::new(Vec3::new(0.0, 0.0, -1.0), Vec3::new(2.0, 1.0, 0.0));
+    /// assert_eq!(tris[..].prim_bounds(0), Some(b));
+    /// assert_eq!(tris[..].prim_bounds(1), None); // out of range
+    /// ```
     fn prim_bounds(&self, i: usize) -> Option<Aabb>;
 }
 
@@ -304,6 +321,18 @@ pub(crate) struct PrepInfo {
 }
 
 /// Most primitives a build accepts: node indices (`2 n - 1` nodes) must fit in a `u32`.
+///
+/// ```
+/// use strahl::{Aabb, build::{BuildError, BuildParams, Bvh2, MAX_PRIMITIVES, Primitives}};
+/// struct TooMany;
+/// impl Primitives for TooMany {
+///     fn prim_count(&self) -> usize { MAX_PRIMITIVES + 1 }
+///     fn prim_bounds(&self, _: usize) -> Option<Aabb> { None }
+/// }
+/// let err = Bvh2::build(&TooMany, &BuildParams::default()).unwrap_err();
+/// assert_eq!(err, BuildError::TooManyPrimitives { count: MAX_PRIMITIVES + 1 });
+/// assert!(2 * MAX_PRIMITIVES - 1 <= u32::MAX as usize); // every node index fits
+/// ```
 pub const MAX_PRIMITIVES: usize = (1 << 31) - 1;
 
 /// Fills `refs` with references to the valid primitives of `prims` (one pass; `refs` keeps its

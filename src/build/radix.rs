@@ -17,10 +17,34 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 /// An unsigned integer key for [`radix_sort_pairs`].
+///
+/// ```
+/// use strahl::build::radix::{RadixKey, radix_sort_pairs};
+/// assert_eq!((<u32 as RadixKey>::BITS, <u64 as RadixKey>::BITS), (32, 64));
+/// // 64-bit keys sort like 32-bit ones, on as many low bits as asked for.
+/// let mut keys = vec![1u64 << 40, 3, 1 << 33];
+/// let mut vals = vec![0u32, 1, 2];
+/// radix_sort_pairs(&mut keys, &mut vals, 41);
+/// assert_eq!(vals, [1, 2, 0]);
+/// ```
 pub trait RadixKey: Copy + Default + Ord {
     /// Width of the type in bits.
+    ///
+    /// ```
+    /// use strahl::build::radix::RadixKey;
+    /// assert_eq!((<u32 as RadixKey>::BITS, <u64 as RadixKey>::BITS), (u32::BITS, u64::BITS));
+    /// // The top digit of a key starts BITS - width bits up.
+    /// let top = <u64 as RadixKey>::BITS - 4;
+    /// assert_eq!((0xAu64 << 60).digit(top, 0xf), 0xA);
+    /// ```
     const BITS: u32;
     /// `(self >> shift) & mask` as an index.
+    ///
+    /// ```
+    /// use strahl::build::radix::RadixKey;
+    /// assert_eq!(0xabcu32.digit(4, 0xf), 0xb);
+    /// assert_eq!((0x3ffu64 << 40 | 7).digit(40, 0x3ff), 0x3ff);
+    /// ```
     fn digit(self, shift: u32, mask: u32) -> usize;
 }
 

@@ -29,6 +29,17 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 /// What [`Bvh2::optimize_rotations`] did.
+///
+/// ```
+/// use strahl::{build::{BuildParams, Bvh2}, traverse::MAX_DEPTH};
+/// let tris = strahl::scene::thin_soup(5_000, 1);
+/// let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::fastest()).unwrap();
+/// let before = bvh.sah_cost(1.0, 1.0);
+/// let stats = bvh.optimize_rotations(4, MAX_DEPTH).unwrap();
+/// assert!(stats.rotations > 0 && (1..=4).contains(&stats.rounds));
+/// assert_eq!(stats.max_depth, bvh.validate(&tris[..]).unwrap().max_depth);
+/// assert!(bvh.sah_cost(1.0, 1.0) < before);
+/// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RotationStats {
     /// Rotations applied, over all rounds.

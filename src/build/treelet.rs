@@ -106,7 +106,15 @@ pub(crate) fn optimize(
         height: [0; SUBSETS],
         prims: [0; SUBSETS],
     };
-    for round in 0..tp.rounds.max(1) {
+    // The documented range (`1 ..= 16`) holds here too: this is also reached without
+    // `BuildParams::check`, through `Bvh2::optimize_treelets`.
+    let mut before = u32::MAX;
+    for round in 0..tp.rounds.clamp(1, 16) {
+        if stats.restructured == before {
+            // The last round changed nothing, so another would find the same tree.
+            break;
+        }
+        before = stats.restructured;
         pre_order(&bvh.nodes, bvh.prim_indices.len(), s, round == 0)?;
         let nodes = &mut bvh.nodes;
         let TreeletScratch { order, info, .. } = s;

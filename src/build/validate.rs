@@ -7,6 +7,17 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 /// Shape statistics of a valid tree, from [`Bvh2::validate`].
+///
+/// ```
+/// use strahl::build::{BuildParams, Bvh2};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let s = bvh.validate(&tris[..]).unwrap();
+/// assert_eq!((s.primitives, s.nodes), (320, 2 * s.leaves - 1)); // a binary tree
+/// assert!(1 <= s.min_leaf_size && s.max_leaf_size <= 8);
+/// assert!((s.mean_leaf_size * s.leaves as f32 - 320.0).abs() < 1e-3);
+/// assert!(s.mean_leaf_depth <= s.max_depth as f32);
+/// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BvhStats {
     /// Nodes (all reachable).
@@ -29,6 +40,14 @@ pub struct BvhStats {
 
 /// The first broken invariant [`Bvh2::validate`] found (node, slot and primitive numbers are
 /// indices into `nodes`, `prim_indices` and the primitives).
+///
+/// ```
+/// use strahl::build::{BuildParams, Bvh2, ValidateError};
+/// let tris = strahl::scene::icosphere(1).to_soup();
+/// let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// bvh.prim_indices[0] = 1000; // beyond the 80 triangles
+/// assert_eq!(bvh.validate(&tris[..]), Err(ValidateError::PrimOutOfRange { slot: 0, prim: 1000 }));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ValidateError {
     /// An interior node's children (`child`, `child + 1`) lie beyond the node array.

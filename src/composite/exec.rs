@@ -9,18 +9,67 @@ use alloc::vec::Vec;
 
 /// Moves bytes between ranks. Implementations: [`ThreadTransport`](super::ThreadTransport)
 /// (in-process, for tests) and, behind the feature `mpi`, `MpiTransport`.
+///
+/// ```
+/// use strahl::composite::{KVec, Plan, RgbaF32, Schedule, Transport, TransportError, composite};
+/// struct Solo; // one rank alone: nothing to send or receive
+/// impl Transport for Solo {
+///     fn rank(&self) -> u32 { 0 }
+///     fn size(&self) -> u32 { 1 }
+///     fn exchange(&mut self, _: u32, out: Vec<(u32, Vec<u8>)>, from: &[u32]) -> Result<Vec<Vec<u8>>, TransportError> {
+///         if out.is_empty() && from.is_empty() { Ok(Vec::new()) } else { Err(TransportError("no such rank")) }
+///     }
+/// }
+/// let img = [RgbaF32([0.5; 4]); 3];
+/// let plan = Plan { schedule: Schedule::RadixK(KVec::direct_send(1)), order: &[0], root: 0, sparse: true };
+/// assert_eq!(composite(&mut Solo, &img, &plan).unwrap().0.unwrap(), img);
+/// ```
 pub trait Transport {
     /// This rank, `0 .. size`.
+    ///
+    /// ```
+    /// use strahl::composite::{ThreadTransport, Transport};
+    /// assert_eq!(ThreadTransport::run(3, |t| t.rank()), [0, 1, 2]);
+    /// ```
     fn rank(&self) -> u32;
     /// Number of ranks.
+    ///
+    /// ```
+    /// use strahl::composite::{ThreadTransport, Transport};
+    /// assert_eq!(ThreadTransport::run(3, |t| t.size()), [3, 3, 3]);
+    /// ```
     fn size(&self) -> u32;
     /// Sends every `(to, bytes)` of `sends` and returns one message from each rank of `from`, in
     /// that order, all with `tag`. When every rank calls it with matching lists it must not
     /// deadlock (send without blocking, or post the receives first).
+    ///
+    /// ```
+    /// use strahl::composite::{ThreadTransport, Transport};
+    /// // Ranks 1 and 2 send to rank 0, which receives in the order it asks for.
+    /// let got = ThreadTransport::run(3, |t| {
+    ///     let sends = if t.rank() == 0 { vec![] } else { vec![(0, vec![10 * t.rank() as u8])] };
+    ///     let from: &[u32] = if t.rank() == 0 { &[2, 1] } else { &[] };
+    ///     t.exchange(7, sends, from).unwrap()
+    /// });
+    /// assert_eq!(got[0], [vec![20], vec![10]]);
+    /// assert!(got[1].is_empty() && got[2].is_empty());
+    /// ```
     fn exchange(&mut self, tag: u32, sends: Vec<(u32, Vec<u8>)>, from: &[u32]) -> Result<Vec<Vec<u8>>, TransportError>;
 
     /// Waits until every rank has called it (through rank 0, with empty messages and tag
     /// [`BARRIER_TAG`]), so that timings after it measure compositing, not rendering imbalance.
+    ///
+    /// ```
+    /// use std::sync::atomic::{AtomicU32, Ordering};
+    /// use strahl::composite::{ThreadTransport, Transport};
+    /// let arrived = AtomicU32::new(0);
+    /// let seen = ThreadTransport::run(4, |t| {
+    ///     arrived.fetch_add(1, Ordering::SeqCst);
+    ///     t.barrier().unwrap();
+    ///     arrived.load(Ordering::SeqCst) // no rank gets past until all four have arrived
+    /// });
+    /// assert_eq!(seen, [4; 4]);
+    /// ```
     fn barrier(&mut self) -> Result<(), TransportError> {
         let (me, p) = (self.rank(), self.size());
         if me == 0 {
@@ -37,9 +86,25 @@ pub trait Transport {
 
 /// Tags from this value up are reserved for [`Transport::barrier`]; compositing uses small tags
 /// (the round number).
+///
+/// ```
+/// use strahl::composite::{exec::BARRIER_TAG, schedule::MAX_ROUNDS};
+/// // Compositing tags (the rounds, then the gather) stay below the barrier's,
+/// assert!((MAX_ROUNDS as u32) < BARRIER_TAG);
+/// // and the barrier's two tags are in MPI's guaranteed range (up to 32767).
+/// assert!(BARRIER_TAG + 1 <= 32767);
+/// ```
 pub const BARRIER_TAG: u32 = 0x7000;
 
 /// A transport failure (a peer went away, or MPI reported an error).
+///
+/// ```
+/// use strahl::composite::{ThreadTransport, Transport, TransportError};
+/// let mut t = ThreadTransport::group(1).remove(0);
+/// let err = t.exchange(0, vec![(5, vec![1])], &[]).unwrap_err();
+/// assert_eq!(err, TransportError("no such rank"));
+/// assert_eq!(err.to_string(), "transport: no such rank");
+/// ```
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct TransportError(pub &'static str);
 
@@ -52,6 +117,16 @@ impl core::fmt::Display for TransportError {
 impl core::error::Error for TransportError {}
 
 /// Why compositing failed.
+///
+/// ```
+/// use strahl::composite::{CompositeError, KVec, Pixel, Plan, RgbaF32, Schedule, ThreadTransport, composite};
+/// let mut t = ThreadTransport::group(1).remove(0);
+/// // A k-vector for two ranks on a group of one.
+/// let plan = Plan { schedule: Schedule::RadixK(KVec::direct_send(2)), order: &[0], root: 0, sparse: true };
+/// let err = composite(&mut t, &[RgbaF32::EMPTY; 4], &plan).unwrap_err();
+/// assert_eq!(err, CompositeError::BadPlan);
+/// assert_eq!(err.to_string(), "compositing plan does not match the ranks");
+/// ```
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum CompositeError {
     /// The order is not a permutation of `0 .. size`, or the k-vector's product is not `size`.
@@ -90,6 +165,19 @@ impl From<DecodeError> for CompositeError {
 }
 
 /// Which schedule to run.
+///
+/// ```
+/// use strahl::composite::{DepthPixel, KVec, Plan, Schedule, ThreadTransport, Transport, composite};
+/// let order = [0, 1, 2, 3];
+/// for schedule in [Schedule::Tree, Schedule::RadixK(KVec::new(&[2, 2]).unwrap())] {
+///     let out = ThreadTransport::run(4, |t| {
+///         let img = vec![DepthPixel::new(t.rank() as f32, t.rank()); 5];
+///         let plan = Plan { schedule, order: &order, root: 0, sparse: true };
+///         composite(t, &img, &plan).unwrap().0
+///     });
+///     assert!(out[0].as_ref().unwrap().iter().all(|p| p.depth() == 0.0)); // rank 0's samples are nearest
+/// }
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Schedule {
     /// Radix-k with the given k-vector (direct-send `[P]`, binary-swap `[2, .., 2]`, or any).
@@ -99,6 +187,18 @@ pub enum Schedule {
 }
 
 /// What to composite and how.
+///
+/// ```
+/// use strahl::composite::{Plan, RgbaF32, Schedule, ThreadTransport, Transport, composite};
+/// let (red, green) = (RgbaF32([1.0, 0.0, 0.0, 1.0]), RgbaF32([0.0, 1.0, 0.0, 1.0]));
+/// let order = [1, 0]; // rank 1 is nearer the viewer than rank 0
+/// let out = ThreadTransport::run(2, |t| {
+///     let plan = Plan { schedule: Schedule::Tree, order: &order, root: 1, sparse: false };
+///     composite(t, &[if t.rank() == 1 { red } else { green }; 3], &plan).unwrap().0
+/// });
+/// assert!(out[0].is_none()); // only the root gets the image
+/// assert_eq!(out[1], Some(vec![red; 3]));
+/// ```
 #[derive(Clone, Debug)]
 pub struct Plan<'a> {
     /// The schedule.
@@ -113,6 +213,19 @@ pub struct Plan<'a> {
 }
 
 /// What one rank did.
+///
+/// ```
+/// use strahl::composite::{KVec, Plan, RgbaF32, Schedule, ThreadTransport, composite};
+/// let order = [0, 1];
+/// let stats = ThreadTransport::run(2, |t| {
+///     let plan = Plan { schedule: Schedule::RadixK(KVec::direct_send(2)), order: &order, root: 0, sparse: true };
+///     composite(t, &[RgbaF32([0.5; 4]); 10], &plan).unwrap().1
+/// });
+/// // Each rank sends the other one half: a header of one run (12 bytes) and 5 pixels of 16 bytes.
+/// assert_eq!((stats[0].messages, stats[0].bytes_sent), (1, 12 + 5 * 16));
+/// assert_eq!((stats[0].gather_bytes, stats[1].gather_bytes), (0, 12 + 5 * 16)); // rank 1 to the root
+/// assert_eq!(stats[0].round_seconds.len(), 2); // one round, then the gather
+/// ```
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct CompositeStats {
     /// Bytes this rank sent during the compositing rounds (headers included, final gather not).
@@ -372,6 +485,14 @@ pub fn measure_cost_model<T: Transport>(t: &mut T) -> Result<super::CostModel, T
 }
 
 /// The serial reference: `images` in visibility order (nearest first) composited front to back.
+///
+/// ```
+/// use strahl::composite::{Pixel, RgbaF32, composite_serial};
+/// let front = [RgbaF32([0.5, 0.0, 0.0, 0.5]), RgbaF32::EMPTY];
+/// let back = [RgbaF32([0.0, 1.0, 0.0, 1.0]); 2];
+/// let img = composite_serial(&[&front[..], &back[..]]);
+/// assert_eq!(img, [RgbaF32([0.5, 0.5, 0.0, 1.0]), RgbaF32([0.0, 1.0, 0.0, 1.0])]);
+/// ```
 pub fn composite_serial<P: Pixel>(images: &[&[P]]) -> Vec<P> {
     let n = images.iter().map(|i| i.len()).max().unwrap_or(0);
     let mut acc = vec![P::EMPTY; n];

@@ -42,6 +42,16 @@ fn split(b: &Aabb, p: usize) -> (usize, f32) {
 }
 
 /// Where the viewer is.
+///
+/// ```
+/// use strahl::{Aabb, Vec3, composite::{View, visibility_order}};
+/// let b = Aabb::new(Vec3::ZERO, Vec3::new(2.0, 1.0, 1.0)); // two parts: x < 1 and x > 1
+/// let mut order = [0; 2];
+/// visibility_order(&b, View::Eye(Vec3::new(1.5, 0.5, 0.5)), &mut order);
+/// assert_eq!(order, [1, 0]); // an eye inside part 1 sees it first
+/// visibility_order(&b, View::Direction(Vec3::X), &mut order);
+/// assert_eq!(order, [0, 1]); // looking along +x, part 0 is in front
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum View {
     /// A perspective eye point.

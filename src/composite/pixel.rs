@@ -2,7 +2,10 @@
 //! as a scalar reference and a SIMD form that gives the same bits.
 //!
 //! Every pixel type has an `EMPTY` value that is the identity of its operator, so that sparse
-//! images can skip empty pixels without changing a single bit of the result.
+//! images can skip empty pixels without changing a single bit of the result. For f32 over this
+//! holds where alpha is finite: with a NaN or infinite alpha in front, `(1 - a) 0` is NaN, so a
+//! sparse run (which skips the empty pixel behind) and a dense one differ on that pixel (NaN
+//! against the front pixel). Such input is outside what over means; it never panics.
 //!
 //! # Operators
 //! - **Over** (Porter and Duff 1984), premultiplied colour: `front over back = front + (1 - a_front)
@@ -22,21 +25,91 @@ use wide::{f32x8, u16x16, u32x8, u64x4};
 
 /// Largest difference, per channel, between two compositing orders of up to 64 `f32` images with
 /// channels in `[0, 1]` (a stated bound for tests; the observed differences are far smaller).
+///
+/// ```
+/// use strahl::composite::{OVER_F32_TOLERANCE, over_f32_scalar};
+/// let (a, b, c) = ([0.3, 0.1, 0.2, 0.4f32], [0.2, 0.5, 0.1, 0.6], [0.7, 0.2, 0.3, 0.9]);
+/// let mut left = a; // (a over b) over c
+/// over_f32_scalar(&mut left, &b, true);
+/// over_f32_scalar(&mut left, &c, true);
+/// let mut bc = b; // a over (b over c)
+/// over_f32_scalar(&mut bc, &c, true);
+/// let mut right = a;
+/// over_f32_scalar(&mut right, &bc, true);
+/// assert!(left.iter().zip(&right).all(|(l, r)| (l - r).abs() <= OVER_F32_TOLERANCE));
+/// ```
 pub const OVER_F32_TOLERANCE: f32 = 64.0 * f32::EPSILON;
 
 /// A pixel that can be composited: `EMPTY` is the identity of the operator.
+///
+/// ```
+/// use strahl::composite::{DepthPixel, Pixel, Rgba8, RgbaF32};
+/// // Compositing with `EMPTY` changes nothing, for every pixel type.
+/// fn unchanged<P: Pixel>(p: P) -> bool {
+///     let mut acc = [p];
+///     P::composite_behind(&mut acc, &[P::EMPTY]);
+///     acc[0] == p
+/// }
+/// assert!(unchanged(RgbaF32([0.2, 0.1, 0.0, 0.5])));
+/// assert!(unchanged(Rgba8([10, 20, 30, 40])));
+/// assert!(unchanged(DepthPixel::new(3.0, 7)));
+/// assert_eq!(RgbaF32::BYTES, 16);
+/// ```
 pub trait Pixel: Pod + PartialEq + Send + Sync + core::fmt::Debug + 'static {
     /// The identity: compositing with it changes nothing (bit for bit).
+    ///
+    /// ```
+    /// use strahl::composite::{Pixel, Rgba8};
+    /// let p = Rgba8([10, 20, 30, 40]);
+    /// let mut acc = [Rgba8::EMPTY]; // empty in front: the back pixel shows through unchanged
+    /// Rgba8::composite_behind(&mut acc, &[p]);
+    /// assert_eq!(acc, [p]);
+    /// assert_eq!(Rgba8::EMPTY, Rgba8([0; 4]));
+    /// ```
     const EMPTY: Self;
     /// Bytes per pixel on the wire.
+    ///
+    /// ```
+    /// use strahl::composite::{DepthPixel, Pixel, Rgba8, RgbaF32};
+    /// assert_eq!((RgbaF32::BYTES, Rgba8::BYTES, DepthPixel::BYTES), (16, 4, 8));
+    /// ```
     const BYTES: usize = core::mem::size_of::<Self>();
     /// `front[i] = front[i] op back[i]`, where `front` is nearer the viewer. Both the same length.
+    ///
+    /// ```
+    /// use strahl::composite::{Pixel, RgbaF32};
+    /// let mut front = [RgbaF32([0.5, 0.0, 0.0, 0.5])]; // half-transparent red
+    /// RgbaF32::composite_behind(&mut front, &[RgbaF32([0.0, 1.0, 0.0, 1.0])]); // opaque green behind
+    /// assert_eq!(front, [RgbaF32([0.5, 0.5, 0.0, 1.0])]);
+    /// ```
     fn composite_behind(front: &mut [Self], back: &[Self]);
     /// `back[i] = front[i] op back[i]`, where `front` is nearer the viewer. Both the same length.
+    ///
+    /// ```
+    /// use strahl::composite::{Pixel, RgbaF32};
+    /// let (front, back) = (RgbaF32([0.25, 0.0, 0.0, 0.5]), RgbaF32([0.0, 0.5, 0.5, 0.5]));
+    /// let mut acc = [back];
+    /// RgbaF32::composite_in_front(&mut acc, &[front]);
+    /// assert_eq!(acc, [RgbaF32([0.25, 0.25, 0.25, 0.75])]);
+    /// // The same pixel as blending the back one behind the front one.
+    /// let mut other = [front];
+    /// RgbaF32::composite_behind(&mut other, &[back]);
+    /// assert_eq!(acc, other);
+    /// ```
     fn composite_in_front(back: &mut [Self], front: &[Self]);
 }
 
 /// A premultiplied RGBA pixel with `f32` channels.
+///
+/// ```
+/// use strahl::composite::{Pixel, RgbaF32};
+/// // Half-transparent orange (1, 0.5, 0): the colour channels are multiplied by alpha.
+/// let orange = RgbaF32([0.5, 0.25, 0.0, 0.5]);
+/// let mut acc = [orange];
+/// RgbaF32::composite_behind(&mut acc, &[orange]);
+/// assert_eq!(acc, [RgbaF32([0.75, 0.375, 0.0, 0.75])]);
+/// assert_eq!(RgbaF32::default(), RgbaF32::EMPTY);
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Default, Pod, Zeroable)]
 #[repr(C)]
 pub struct RgbaF32(pub [f32; 4]);
@@ -46,6 +119,18 @@ pub struct RgbaF32(pub [f32; 4]);
 /// Aligned like a `u32`: the over kernels work on the four channels as one word, so slices of
 /// `Rgba8` (the empty ones included) are cast to `u32` slices, which needs 4-byte alignment.
 /// Byte buffers cast to `&[Rgba8]` must be 4-aligned too.
+///
+/// ```
+/// use strahl::composite::{Pixel, Rgba8, over_u8_scalar};
+/// let (front, back) = (Rgba8([128, 0, 0, 128]), Rgba8([0, 255, 0, 255]));
+/// let mut acc = [front];
+/// Rgba8::composite_behind(&mut acc, &[back]);
+/// assert_eq!(acc, [Rgba8([128, 127, 0, 255])]);
+/// // The scalar reference on the little-endian `u32` form (R in the low byte) agrees.
+/// let mut word = [u32::from_le_bytes(front.0)];
+/// over_u8_scalar(&mut word, &[u32::from_le_bytes(back.0)], true);
+/// assert_eq!(acc[0].0, word[0].to_le_bytes());
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Pod, Zeroable)]
 #[repr(C, align(4))]
 pub struct Rgba8(pub [u8; 4]);
@@ -72,6 +157,13 @@ const _: () = assert!(core::mem::size_of::<DepthPixel>() == 8);
 
 impl DepthPixel {
     /// A sample at depth `z` (NaN is stored as `+inf`) with colour `rgba` (any `u32`).
+    ///
+    /// ```
+    /// use strahl::composite::DepthPixel;
+    /// assert!(DepthPixel::new(-1.0, 0) < DepthPixel::new(0.5, 0)); // keys order like depths
+    /// assert!(DepthPixel::new(1.0, 2) < DepthPixel::new(1.0, 3)); // a tie goes to the smaller colour
+    /// assert_eq!(DepthPixel::new(f32::NAN, 5).depth(), f32::INFINITY);
+    /// ```
     pub fn new(z: f32, rgba: u32) -> Self {
         let z = if z.is_nan() { f32::INFINITY } else { z };
         let b = z.to_bits();
@@ -81,11 +173,23 @@ impl DepthPixel {
     }
 
     /// `true` for [`Pixel::EMPTY`] (no sample).
+    ///
+    /// ```
+    /// use strahl::composite::{DepthPixel, Pixel};
+    /// assert!(DepthPixel::EMPTY.is_empty());
+    /// assert!(!DepthPixel::new(f32::INFINITY, u32::MAX).is_empty()); // a sample at +inf is a sample
+    /// ```
     pub fn is_empty(self) -> bool {
         self == Self::EMPTY
     }
 
     /// The depth (`+inf` for an empty pixel).
+    ///
+    /// ```
+    /// use strahl::composite::{DepthPixel, Pixel};
+    /// assert_eq!(DepthPixel::new(-2.5, 0xff).depth(), -2.5);
+    /// assert_eq!(DepthPixel::EMPTY.depth(), f32::INFINITY);
+    /// ```
     pub fn depth(self) -> f32 {
         if self.is_empty() {
             return f32::INFINITY;
@@ -96,6 +200,12 @@ impl DepthPixel {
     }
 
     /// The colour (0 for an empty pixel).
+    ///
+    /// ```
+    /// use strahl::composite::{DepthPixel, Pixel};
+    /// assert_eq!(DepthPixel::new(1.0, 0x8000_00ff).rgba(), 0x8000_00ff);
+    /// assert_eq!(DepthPixel::EMPTY.rgba(), 0);
+    /// ```
     pub fn rgba(self) -> u32 {
         if self.is_empty() { 0 } else { self.0 as u32 }
     }
@@ -139,6 +249,15 @@ impl Pixel for DepthPixel {
 }
 
 /// `x / 255` rounded to nearest, exact for `0 <= x <= 255 * 255`.
+///
+/// ```
+/// use strahl::composite::div255;
+/// const FULL: u32 = div255(255 * 255);
+/// assert_eq!(FULL, 255);
+/// assert_eq!(div255(127), 0); // 0.498 rounds down
+/// assert_eq!(div255(128), 1); // 0.502 rounds up
+/// assert_eq!(div255(200 * 100), 78); // 78.43
+/// ```
 #[inline(always)]
 pub const fn div255(x: u32) -> u32 {
     let x = x + 128;
@@ -169,6 +288,17 @@ pub fn over_f32_scalar(acc: &mut [f32], other: &[f32], acc_in_front: bool) {
 }
 
 /// f32 over, two pixels per `f32x8`; the same operations as [`over_f32_scalar`], so the same bits.
+///
+/// ```
+/// use strahl::composite::{over_f32_scalar, over_f32_x8};
+/// let back: Vec<f32> = (0..12).map(|i| i as f32 / 16.0).collect();
+/// let mut simd = vec![0.5, 0.25, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.1, 0.2, 0.3, 0.9];
+/// let mut scalar = simd.clone();
+/// over_f32_x8(&mut simd, &back, true); // three pixels: one vector of two, then a scalar tail
+/// over_f32_scalar(&mut scalar, &back, true);
+/// assert_eq!(simd, scalar);
+/// assert_eq!(&simd[4..8], &back[4..8]); // an empty front pixel lets the back one through
+/// ```
 pub fn over_f32_x8(acc: &mut [f32], other: &[f32], acc_in_front: bool) {
     let n = acc.len().min(other.len()) / 8 * 8;
     let (acc_v, acc_t) = acc.split_at_mut(n);
@@ -215,6 +345,18 @@ pub fn over_u8_scalar(acc: &mut [u32], other: &[u32], acc_in_front: bool) {
 /// (G, A) of each pixel are spread to 16-bit fields, where `channel * (255 - alpha) <= 65025`
 /// fits, so one 16-bit multiply does 16 channels. The same exact rounding and saturation as
 /// [`over_u8_scalar`], so the same bits.
+///
+/// ```
+/// use strahl::composite::{over_u8_scalar, over_u8_x8};
+/// // Alpha 0, 25, .., 225 with some red below it, in front of opaque green.
+/// let front: Vec<u32> = (0..10).map(|i| ((i * 25) << 24) | (i * 12)).collect();
+/// let back = vec![0xff_00_ff_00u32; 10];
+/// let (mut simd, mut scalar) = (front.clone(), front.clone());
+/// over_u8_x8(&mut simd, &back, true); // one vector of eight, then a scalar tail of two
+/// over_u8_scalar(&mut scalar, &back, true);
+/// assert_eq!(simd, scalar);
+/// assert_eq!(simd[0], 0xff_00_ff_00); // a transparent front shows the back
+/// ```
 pub fn over_u8_x8(acc: &mut [u32], other: &[u32], acc_in_front: bool) {
     let n = acc.len().min(other.len()) / 8 * 8;
     let (acc_v, acc_t) = acc.split_at_mut(n);
@@ -249,6 +391,14 @@ pub fn over_u8_x8(acc: &mut [u32], other: &[u32], acc_in_front: bool) {
 }
 
 /// Scalar reference for depth compositing on keys ([`DepthPixel`]): `acc[i] = min(acc[i], other[i])`.
+///
+/// ```
+/// use strahl::composite::{DepthPixel, depth_scalar};
+/// let (near, far) = (DepthPixel::new(1.0, 0xff), DepthPixel::new(2.0, 0xee));
+/// let mut acc = [near.0, far.0];
+/// depth_scalar(&mut acc, &[far.0, near.0]);
+/// assert_eq!(acc, [near.0, near.0]); // the nearer sample wins on either side
+/// ```
 pub fn depth_scalar(acc: &mut [u64], other: &[u64]) {
     for (a, &o) in acc.iter_mut().zip(other) {
         *a = (*a).min(o);
@@ -256,6 +406,17 @@ pub fn depth_scalar(acc: &mut [u64], other: &[u64]) {
 }
 
 /// Depth compositing, four keys per `u64x4`; equal to [`depth_scalar`].
+///
+/// ```
+/// use strahl::composite::{DepthPixel, depth_scalar, depth_x4};
+/// let keys: Vec<u64> = (0..6u32).map(|i| DepthPixel::new(i as f32, i).0).collect();
+/// let mut simd = vec![DepthPixel::new(2.5, 0).0; 6];
+/// let mut scalar = simd.clone();
+/// depth_x4(&mut simd, &keys); // one vector of four keys, then a scalar tail of two
+/// depth_scalar(&mut scalar, &keys);
+/// assert_eq!(simd, scalar);
+/// assert_eq!(DepthPixel(simd[5]).depth(), 2.5);
+/// ```
 pub fn depth_x4(acc: &mut [u64], other: &[u64]) {
     let n = acc.len().min(other.len()) / 4 * 4;
     let (acc_v, acc_t) = acc.split_at_mut(n);

@@ -27,6 +27,12 @@
 use core::ops::Range;
 
 /// Most rounds a k-vector can have (every factor is at least 2 and `P` fits in `u32`).
+///
+/// ```
+/// use strahl::composite::{KVec, schedule::MAX_ROUNDS};
+/// assert_eq!(KVec::binary_swap(1 << 31).unwrap().rounds(), 31);
+/// assert!(KVec::new(&[2; MAX_ROUNDS + 1]).is_none());
+/// ```
 pub const MAX_ROUNDS: usize = 32;
 
 /// A k-vector: the group size of each round; the product is the number of ranks.
@@ -54,6 +60,14 @@ impl core::fmt::Debug for KVec {
 impl KVec {
     /// A k-vector from its factors, each at least 2 (`[]` is the single-rank case `P = 1`);
     /// `None` if a factor is below 2, there are more than [`MAX_ROUNDS`], or the product overflows.
+    ///
+    /// ```
+    /// use strahl::composite::KVec;
+    /// assert_eq!(KVec::new(&[4, 2]).unwrap().ranks(), 8);
+    /// assert_eq!(KVec::new(&[]).unwrap().ranks(), 1); // one rank, no rounds
+    /// assert!(KVec::new(&[1, 8]).is_none()); // a factor below 2
+    /// assert!(KVec::new(&[1 << 16, 1 << 16]).is_none()); // the product overflows `u32`
+    /// ```
     pub fn new(factors: &[u32]) -> Option<Self> {
         if factors.len() > MAX_ROUNDS || factors.iter().any(|&k| k < 2) {
             return None;
@@ -65,6 +79,13 @@ impl KVec {
     }
 
     /// Direct-send: one round, all `p` ranks in one group (`[]` for `p <= 1`).
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::direct_send(4), 100);
+    /// assert_eq!(s.sends(0, 0).count(), 3); // one piece to each other rank
+    /// assert_eq!(KVec::direct_send(1).rounds(), 0); // one rank: nothing to send
+    /// ```
     pub fn direct_send(p: u32) -> Self {
         if p <= 1 { Self::new(&[]) } else { Self::new(&[p]) }.unwrap_or(Self {
             k: [0; MAX_ROUNDS],
@@ -73,6 +94,14 @@ impl KVec {
     }
 
     /// Binary-swap, `[2, 2, .., 2]`; `None` unless `p` is a power of two.
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::binary_swap(8).unwrap(), 64);
+    /// assert!((0..3).all(|round| s.sends(5, round).count() == 1)); // one partner per round
+    /// assert_eq!(s.final_region(5), 40..48); // halved three times
+    /// assert_eq!(KVec::binary_swap(12), None);
+    /// ```
     pub fn binary_swap(p: u32) -> Option<Self> {
         if !p.is_power_of_two() {
             return None;
@@ -84,27 +113,56 @@ impl KVec {
     }
 
     /// The factors.
+    ///
+    /// ```
+    /// use strahl::composite::KVec;
+    /// assert_eq!(KVec::new(&[3, 2]).unwrap().as_slice(), &[3, 2]);
+    /// ```
     pub fn as_slice(&self) -> &[u32] {
         &self.k[..self.len]
     }
 
     /// Number of rounds.
+    ///
+    /// ```
+    /// use strahl::composite::KVec;
+    /// assert_eq!(KVec::binary_swap(16).unwrap().rounds(), 4);
+    /// ```
     pub fn rounds(&self) -> usize {
         self.len
     }
 
     /// The number of ranks, the product of the factors.
+    ///
+    /// ```
+    /// use strahl::composite::KVec;
+    /// assert_eq!(KVec::new(&[3, 2, 2]).unwrap().ranks(), 12);
+    /// ```
     pub fn ranks(&self) -> u32 {
         self.as_slice().iter().product()
     }
 
     /// Product of the factors of rounds before `round` (the digit's place value).
+    ///
+    /// ```
+    /// use strahl::composite::KVec;
+    /// let k = KVec::new(&[3, 2, 2]).unwrap();
+    /// assert_eq!([k.stride(0), k.stride(1), k.stride(2), k.stride(3)], [1, 3, 6, 12]);
+    /// assert_eq!(k.stride(9), 12); // past the last round: all the factors
+    /// ```
     pub fn stride(&self, round: usize) -> u32 {
         self.as_slice()[..round.min(self.len)].iter().product()
     }
 }
 
 /// One message of a round: `from` sends the pixels `range` to `to` (virtual ranks).
+///
+/// ```
+/// use strahl::composite::{KVec, Message, RadixK};
+/// let s = RadixK::new(KVec::binary_swap(2).unwrap(), 10);
+/// let sent: Vec<Message> = s.sends(0, 0).collect();
+/// assert_eq!(sent, [Message { from: 0, to: 1, range: 5..10 }]); // rank 0 keeps the first half
+/// ```
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Message {
     /// Sending virtual rank.
@@ -116,6 +174,14 @@ pub struct Message {
 }
 
 /// Piece `j` of `k` of the pixel range `r`: `[j n / k, (j + 1) n / k)` relative to its start.
+///
+/// ```
+/// use strahl::composite::piece;
+/// assert_eq!(piece(&(0..10), 0, 3), 0..3);
+/// assert_eq!(piece(&(0..10), 1, 3), 3..6);
+/// assert_eq!(piece(&(0..10), 2, 3), 6..10); // uneven pieces differ by at most one pixel
+/// assert!(piece(&(100..102), 0, 4).is_empty()); // more pieces than pixels: some are empty
+/// ```
 pub fn piece(r: &Range<u32>, j: u32, k: u32) -> Range<u32> {
     let n = (r.end - r.start) as u64;
     let at = |j: u32| r.start + (j as u64 * n / k as u64) as u32;
@@ -145,9 +211,22 @@ pub struct RadixK {
 }
 
 /// Up to this many members per group are returned inline by [`RadixK::group`].
+///
+/// ```
+/// use strahl::composite::{KVec, RadixK, schedule::MAX_GROUP};
+/// let s = RadixK::new(KVec::direct_send(100), 1000);
+/// assert_eq!(s.group(0, 0).len(), MAX_GROUP); // truncated: 100 members
+/// ```
 pub const MAX_GROUP: usize = 64;
 
 /// A small inline list of virtual ranks (a group).
+///
+/// ```
+/// use strahl::composite::{KVec, RadixK};
+/// let g = RadixK::new(KVec::direct_send(4), 8).group(2, 0);
+/// assert_eq!(g, [0, 1, 2, 3]);
+/// assert_eq!(g.iter().sum::<u32>(), 6); // derefs to `[u32]`
+/// ```
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub struct Group {
     ranks: [u32; MAX_GROUP],
@@ -175,11 +254,23 @@ impl<const N: usize> PartialEq<[u32; N]> for Group {
 
 impl RadixK {
     /// The schedule for `kvec` over an image of `pixels` pixels.
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::new(&[2, 3]).unwrap(), 60);
+    /// assert_eq!((s.kvec.ranks(), s.pixels), (6, 60));
+    /// ```
     pub fn new(kvec: KVec, pixels: u32) -> Self {
         Self { kvec, pixels }
     }
 
     /// Digit `round` of virtual rank `v`.
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::new(&[3, 2]).unwrap(), 100);
+    /// assert_eq!((s.digit(5, 0), s.digit(5, 1)), (2, 1)); // 5 = 2 + 3 * 1
+    /// ```
     pub fn digit(&self, v: u32, round: usize) -> u32 {
         (v / self.kvec.stride(round)) % self.kvec.as_slice()[round]
     }
@@ -187,6 +278,14 @@ impl RadixK {
     /// The members of `v`'s group in `round`, in digit (= visibility) order. Groups larger than
     /// [`MAX_GROUP`] are truncated; [`auto_kvec`] never makes them and [`KVec::direct_send`] users
     /// with more ranks should call [`RadixK::member`] instead.
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::binary_swap(8).unwrap(), 64);
+    /// assert_eq!(s.group(5, 0), [4, 5]); // 5 = 0b101: flip bit 0,
+    /// assert_eq!(s.group(5, 1), [5, 7]); // then bit 1,
+    /// assert_eq!(s.group(5, 2), [1, 5]); // then bit 2
+    /// ```
     pub fn group(&self, v: u32, round: usize) -> Group {
         let k = self.kvec.as_slice()[round];
         let mut g = Group {
@@ -200,12 +299,28 @@ impl RadixK {
     }
 
     /// Member `j` (digit `j`) of `v`'s group in `round`.
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::new(&[3, 2]).unwrap(), 100);
+    /// assert_eq!(s.member(4, 1, 0), 1); // 4's group in round 1 is [1, 4]
+    /// let s = RadixK::new(KVec::direct_send(100), 1000);
+    /// assert_eq!(s.member(7, 0, 99), 99); // past `MAX_GROUP`, where `group` truncates
+    /// ```
     pub fn member(&self, v: u32, round: usize, j: u32) -> u32 {
         let s = self.kvec.stride(round);
         v - self.digit(v, round) * s + j * s
     }
 
     /// The pixel range `v` holds at the start of `round` (`round == rounds` gives the final one).
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::binary_swap(4).unwrap(), 100);
+    /// assert_eq!(s.region(3, 0), 0..100); // every rank starts with the whole image
+    /// assert_eq!(s.region(3, 1), 50..100);
+    /// assert_eq!(s.region(3, 2), 75..100); // `round == rounds`: the final range
+    /// ```
     pub fn region(&self, v: u32, round: usize) -> Range<u32> {
         let mut r = 0..self.pixels;
         for i in 0..round.min(self.kvec.rounds()) {
@@ -215,11 +330,27 @@ impl RadixK {
     }
 
     /// The pixel range `v` owns after the last round.
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::direct_send(3), 10);
+    /// let owned: Vec<_> = (0..3).map(|v| s.final_region(v)).collect();
+    /// assert_eq!(owned, [0..3, 3..6, 6..10]);
+    /// ```
     pub fn final_region(&self, v: u32) -> Range<u32> {
         self.region(v, self.kvec.rounds())
     }
 
     /// The messages `v` sends in `round`: piece `j` of its range to member `j`, for `j != digit`.
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, Message, RadixK};
+    /// let s = RadixK::new(KVec::direct_send(3), 9);
+    /// let sent: Vec<Message> = s.sends(1, 0).collect();
+    /// assert_eq!(sent, [Message { from: 1, to: 0, range: 0..3 }, Message { from: 1, to: 2, range: 6..9 }]);
+    /// // Every send is one of its receiver's receives.
+    /// assert!(sent.iter().all(|m| s.receives(m.to, 0).any(|r| r == *m)));
+    /// ```
     pub fn sends(&self, v: u32, round: usize) -> impl Iterator<Item = Message> + '_ {
         let k = self.kvec.as_slice()[round];
         let d = self.digit(v, round);
@@ -232,6 +363,14 @@ impl RadixK {
     }
 
     /// The messages `v` receives in `round`, in visibility order: piece `digit` from every member.
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::direct_send(3), 9);
+    /// let from: Vec<u32> = s.receives(1, 0).map(|m| m.from).collect();
+    /// assert_eq!(from, [0, 2]); // nearest first
+    /// assert!(s.receives(1, 0).all(|m| m.range == (3..6))); // rank 1's piece from each
+    /// ```
     pub fn receives(&self, v: u32, round: usize) -> impl Iterator<Item = Message> + '_ {
         let k = self.kvec.as_slice()[round];
         let d = self.digit(v, round);
@@ -244,6 +383,12 @@ impl RadixK {
     }
 
     /// Pixels `v` sends over all rounds (before the final gather).
+    ///
+    /// ```
+    /// use strahl::composite::{KVec, RadixK};
+    /// let s = RadixK::new(KVec::binary_swap(4).unwrap(), 100);
+    /// assert_eq!(s.pixels_sent(0), 50 + 25); // n (1 - 1/P)
+    /// ```
     pub fn pixels_sent(&self, v: u32) -> u64 {
         (0..self.kvec.rounds())
             .flat_map(|i| self.sends(v, i))
@@ -276,6 +421,13 @@ pub fn tree_partner(v: u32, round: u32, p: u32) -> Option<(u32, bool)> {
 }
 
 /// Rounds of the tree reduction for `p` ranks: `ceil(log2 p)`.
+///
+/// ```
+/// use strahl::composite::{tree_partner, tree_rounds};
+/// assert_eq!([1, 2, 4, 5, 8].map(tree_rounds), [0, 1, 2, 3, 3]);
+/// // With 5 ranks, rank 0 receives in every round (from 1, 2, then 4).
+/// assert!((0..tree_rounds(5)).all(|round| tree_partner(0, round, 5).is_some_and(|(_, recv)| recv)));
+/// ```
 pub fn tree_rounds(p: u32) -> u32 {
     if p <= 1 { 0 } else { 32 - (p - 1).leading_zeros() }
 }
@@ -304,6 +456,12 @@ impl CostModel {
     /// Ranks on one machine (MPI over shared memory or threads): 5 us per message, 5 GB/s,
     /// 1 ns per blended pixel. Measured on the 2-core development machine to within a factor of
     /// two; [`auto_kvec`] is not sensitive to that.
+    ///
+    /// ```
+    /// use strahl::composite::CostModel;
+    /// let m = CostModel::shared_memory();
+    /// assert_eq!((m.latency, m.seconds_per_blend), (5e-6, 1e-9));
+    /// ```
     pub fn shared_memory() -> Self {
         Self {
             latency: 5e-6,
@@ -313,6 +471,12 @@ impl CostModel {
     }
 
     /// A cluster interconnect: 2 us latency, 10 GB/s, 1 ns per blend.
+    ///
+    /// ```
+    /// use strahl::composite::CostModel;
+    /// let (net, shm) = (CostModel::cluster(), CostModel::shared_memory());
+    /// assert!(net.latency < shm.latency && net.seconds_per_byte < shm.seconds_per_byte);
+    /// ```
     pub fn cluster() -> Self {
         Self {
             latency: 2e-6,
@@ -322,6 +486,17 @@ impl CostModel {
     }
 
     /// Modelled seconds of compositing `pixels` pixels of `bytes_per_pixel` with `kvec`.
+    ///
+    /// ```
+    /// use strahl::composite::{CostModel, KVec};
+    /// let (direct, swap) = (KVec::direct_send(8), KVec::binary_swap(8).unwrap());
+    /// // Latency only: the cost counts messages, the sum of `k - 1`.
+    /// let latency = CostModel { latency: 1.0, seconds_per_byte: 0.0, seconds_per_blend: 0.0 };
+    /// assert_eq!((latency.cost(&direct, 1024, 1), latency.cost(&swap, 1024, 1)), (7.0, 3.0));
+    /// // Bandwidth only: every k-vector sends n (1 - 1/P) pixels.
+    /// let bandwidth = CostModel { latency: 0.0, seconds_per_byte: 1.0, seconds_per_blend: 0.0 };
+    /// assert_eq!((bandwidth.cost(&direct, 1024, 1), bandwidth.cost(&swap, 1024, 1)), (896.0, 896.0));
+    /// ```
     pub fn cost(&self, kvec: &KVec, pixels: u64, bytes_per_pixel: u64) -> f64 {
         let mut n = pixels as f64;
         let mut t = 0.0;
@@ -341,6 +516,17 @@ impl CostModel {
 /// The k-vector with the least modelled cost among all ordered factorisations of `p` into factors
 /// of at most [`MAX_GROUP`] (dynamic programming over the divisors of `p`). A prime `p` above
 /// `MAX_GROUP` gives direct-send.
+///
+/// ```
+/// use strahl::composite::{CostModel, KVec, auto_kvec};
+/// let m = CostModel::shared_memory();
+/// let k = auto_kvec(12, 1 << 20, 16, &m);
+/// assert!(k.ranks() == 12 && m.cost(&k, 1 << 20, 16) <= m.cost(&KVec::direct_send(12), 1 << 20, 16));
+/// // Costly messages: the fewest (the sum of `k - 1`), from 12 = 2 * 2 * 3.
+/// let slow = CostModel { latency: 1.0, ..m };
+/// assert_eq!(auto_kvec(12, 1 << 20, 16, &slow).as_slice().iter().map(|k| k - 1).sum::<u32>(), 4);
+/// assert_eq!(auto_kvec(67, 1 << 20, 16, &m), KVec::direct_send(67)); // a prime above `MAX_GROUP`
+/// ```
 pub fn auto_kvec(p: u32, pixels: u64, bytes_per_pixel: u64, model: &CostModel) -> KVec {
     if p <= 1 {
         return KVec::direct_send(1);

@@ -10,6 +10,17 @@ use super::pixel::Pixel;
 use alloc::vec::Vec;
 
 /// Bytes of the header of an encoded piece with `runs` runs.
+///
+/// ```
+/// use strahl::composite::{Pixel, RgbaF32, encode, sparse::header_bytes};
+/// let mut wire = Vec::new();
+/// encode(&[RgbaF32::EMPTY; 8], true, &mut wire);
+/// assert_eq!(wire.len(), header_bytes(0)); // all empty: only the run count
+/// let (a, e) = (RgbaF32([1.0; 4]), RgbaF32::EMPTY);
+/// wire.clear();
+/// encode(&[a, e, a], true, &mut wire);
+/// assert_eq!(wire.len(), header_bytes(2) + 2 * RgbaF32::BYTES);
+/// ```
 pub const fn header_bytes(runs: usize) -> usize {
     4 + 8 * runs
 }
@@ -66,6 +77,17 @@ pub fn encode<P: Pixel>(pixels: &[P], sparse: bool, out: &mut Vec<u8>) {
 }
 
 /// Why an encoded piece could not be read.
+///
+/// ```
+/// use strahl::composite::{DecodeError, Pixel, RgbaF32, decode_composite, encode};
+/// let mut wire = Vec::new();
+/// encode(&[RgbaF32([1.0; 4]); 3], true, &mut wire);
+/// let (mut two, mut three) = ([RgbaF32::EMPTY; 2], [RgbaF32::EMPTY; 3]);
+/// assert_eq!(decode_composite(&wire, &mut two, true), Err(DecodeError::OutOfRange));
+/// assert_eq!(decode_composite(&wire[..wire.len() - 1], &mut three, true), Err(DecodeError::Truncated));
+/// wire.push(0);
+/// assert_eq!(decode_composite(&wire, &mut three, true), Err(DecodeError::TrailingBytes));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DecodeError {
     /// The message is shorter than its header says.
@@ -91,6 +113,20 @@ impl core::error::Error for DecodeError {}
 /// Composites an encoded piece into `acc` (the same pixel range): the piece's pixels are behind
 /// `acc` (`acc_in_front`) or in front of it. Skipped pixels are left untouched (they are
 /// [`Pixel::EMPTY`], the identity). Never panics on malformed input.
+///
+/// ```
+/// use strahl::composite::{RgbaF32, decode_composite, encode};
+/// let (red, green) = (RgbaF32([0.5, 0.0, 0.0, 0.5]), RgbaF32([0.0, 1.0, 0.0, 1.0]));
+/// let mut wire = Vec::new();
+/// encode(&[green], true, &mut wire);
+/// let mut acc = [red];
+/// decode_composite(&wire, &mut acc, true).unwrap(); // green behind half-transparent red
+/// assert_eq!(acc, [RgbaF32([0.5, 0.5, 0.0, 1.0])]);
+/// let mut acc = [red];
+/// decode_composite(&wire, &mut acc, false).unwrap(); // opaque green in front hides red
+/// assert_eq!(acc, [green]);
+/// assert!(decode_composite(&[9], &mut acc, true).is_err());
+/// ```
 pub fn decode_composite<P: Pixel>(wire: &[u8], acc: &mut [P], acc_in_front: bool) -> Result<(), DecodeError> {
     let word = |at: usize| -> Result<usize, DecodeError> {
         let b = wire.get(at..at + 4).ok_or(DecodeError::Truncated)?;

@@ -34,6 +34,15 @@ pub struct ThreadTransport {
 
 impl ThreadTransport {
     /// `p` connected ranks (at least one).
+    ///
+    /// ```
+    /// use strahl::composite::{ThreadTransport, Transport};
+    /// let mut g = ThreadTransport::group(2);
+    /// g[0].exchange(0, vec![(1, b"hi".to_vec())], &[]).unwrap(); // sends never block
+    /// let got = g[1].exchange(0, vec![], &[0]).unwrap();
+    /// assert_eq!(got, [b"hi".to_vec()]);
+    /// assert_eq!(ThreadTransport::group(0).len(), 1); // at least one rank
+    /// ```
     pub fn group(p: u32) -> Vec<Self> {
         let p = p.max(1);
         let (txs, rxs): (Vec<_>, Vec<_>) = (0..p).map(|_| channel()).unzip();
@@ -52,6 +61,12 @@ impl ThreadTransport {
 
     /// Runs `f` on `p` threads, one per rank, and returns the results in rank order. A panic in
     /// one rank is propagated after the others end (their transports then report errors).
+    ///
+    /// ```
+    /// use strahl::composite::{ThreadTransport, Transport};
+    /// let squares = ThreadTransport::run(4, |t| t.rank() * t.rank());
+    /// assert_eq!(squares, [0, 1, 4, 9]); // in rank order
+    /// ```
     pub fn run<R: Send, F: Fn(&mut ThreadTransport) -> R + Sync>(p: u32, f: F) -> Vec<R> {
         let group = Self::group(p);
         std::thread::scope(|s| {

@@ -38,12 +38,27 @@ impl Default for Aabb {
 
 impl Aabb {
     /// The empty box (`min = +inf`, `max = -inf`): the identity of [`union`](Self::union).
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    /// assert_eq!(Aabb::EMPTY.union(&b), b);
+    /// assert_eq!(Aabb::EMPTY.surface_area(), 0.0);
+    /// assert!(!Aabb::EMPTY.contains_point(Vec3::ZERO));
+    /// ```
     pub const EMPTY: Self = Self {
         min: Vec3::INFINITY,
         max: Vec3::NEG_INFINITY,
     };
 
     /// The box with the given corners (not checked; `min > max` on an axis makes it empty).
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let b = Aabb::new(Vec3::ZERO, Vec3::new(2.0, 1.0, 1.0));
+    /// assert_eq!(b.extent(), Vec3::new(2.0, 1.0, 1.0));
+    /// assert!(Aabb::new(Vec3::ONE, Vec3::ZERO).is_empty()); // min > max: empty, no panic
+    /// ```
     #[inline]
     pub const fn new(min: Vec3, max: Vec3) -> Self {
         Self { min, max }
@@ -66,12 +81,28 @@ impl Aabb {
     }
 
     /// `true` if the box contains no point (`min > max` on some axis, or a NaN bound).
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// assert!(Aabb::EMPTY.is_empty());
+    /// assert!(!Aabb::new(Vec3::ONE, Vec3::ONE).is_empty()); // a single point is not empty
+    /// assert!(Aabb::new(Vec3::ZERO, Vec3::new(1.0, f32::NAN, 1.0)).is_empty());
+    /// ```
     #[inline]
     pub fn is_empty(&self) -> bool {
         !(self.min.x <= self.max.x && self.min.y <= self.max.y && self.min.z <= self.max.z)
     }
 
     /// Extends the box to contain `p`. NaN coordinates are ignored.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let mut b = Aabb::EMPTY;
+    /// b.grow(Vec3::new(1.0, -2.0, 3.0));
+    /// assert_eq!(b, Aabb::new(Vec3::new(1.0, -2.0, 3.0), Vec3::new(1.0, -2.0, 3.0)));
+    /// b.grow(Vec3::new(f32::NAN, 5.0, 0.0)); // the NaN x is ignored, y and z still grow
+    /// assert_eq!(b, Aabb::new(Vec3::new(1.0, -2.0, 0.0), Vec3::new(1.0, 5.0, 3.0)));
+    /// ```
     #[inline]
     pub fn grow(&mut self, p: Vec3) {
         // min_l / max_l return their second operand when the first is NaN.
@@ -80,12 +111,31 @@ impl Aabb {
     }
 
     /// Extends the box to contain `other`.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let mut b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    /// b.grow_aabb(&Aabb::new(Vec3::splat(-1.0), Vec3::splat(0.5)));
+    /// assert_eq!(b, Aabb::new(Vec3::splat(-1.0), Vec3::ONE));
+    /// b.grow_aabb(&Aabb::EMPTY); // growing by the empty box changes nothing
+    /// assert_eq!(b, Aabb::new(Vec3::splat(-1.0), Vec3::ONE));
+    /// ```
     #[inline]
     pub fn grow_aabb(&mut self, other: &Aabb) {
         *self = self.union(other);
     }
 
     /// The smallest box containing both boxes.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let a = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    /// let b = Aabb::new(Vec3::splat(2.0), Vec3::splat(3.0)); // disjoint from `a`
+    /// let u = a.union(&b);
+    /// assert_eq!(u, Aabb::new(Vec3::ZERO, Vec3::splat(3.0)));
+    /// assert_eq!(u, b.union(&a));
+    /// assert!(u.contains(&a) && u.contains(&b));
+    /// ```
     #[inline]
     #[must_use]
     pub fn union(&self, other: &Aabb) -> Aabb {
@@ -106,12 +156,29 @@ impl Aabb {
     }
 
     /// `max - min` (negative or NaN components for the empty box).
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let b = Aabb::new(Vec3::new(-1.0, 0.0, 2.0), Vec3::new(1.0, 0.0, 5.0));
+    /// assert_eq!(b.extent(), Vec3::new(2.0, 0.0, 3.0));
+    /// assert!(Aabb::EMPTY.extent().cmplt(Vec3::ZERO).all()); // -inf - +inf = -inf
+    /// ```
     #[inline]
     pub fn extent(&self) -> Vec3 {
         self.max - self.min
     }
 
     /// Surface area `2 (dx dy + dy dz + dz dx)`; `0` for an empty box.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let b = Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0));
+    /// assert_eq!(b.surface_area(), 22.0); // 2 (2 + 6 + 3)
+    /// let flat = Aabb::new(Vec3::ZERO, Vec3::new(2.0, 3.0, 0.0));
+    /// assert_eq!(flat.surface_area(), 12.0); // both faces of a 2 x 3 rectangle
+    /// // Inverted: the extent (-1, -1, -1) would give 6, but the box is empty.
+    /// assert_eq!(Aabb::new(Vec3::ONE, Vec3::ZERO).surface_area(), 0.0);
+    /// ```
     #[inline]
     pub fn surface_area(&self) -> f32 {
         if self.is_empty() {
@@ -122,6 +189,14 @@ impl Aabb {
     }
 
     /// Half the surface area, which is all the SAH needs (it only compares ratios).
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let b = Aabb::new(Vec3::ZERO, Vec3::new(1.0, 2.0, 3.0));
+    /// assert_eq!(b.half_area(), 11.0);
+    /// assert_eq!(2.0 * b.half_area(), b.surface_area());
+    /// assert_eq!(Aabb::EMPTY.half_area(), 0.0);
+    /// ```
     #[inline]
     pub fn half_area(&self) -> f32 {
         if self.is_empty() {
@@ -132,6 +207,14 @@ impl Aabb {
     }
 
     /// The centre `(min + max) / 2`.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let b = Aabb::new(Vec3::new(-2.0, 0.0, 1.0), Vec3::new(4.0, 0.0, 2.0));
+    /// assert_eq!(b.centroid(), Vec3::new(1.0, 0.0, 1.5));
+    /// assert!(b.contains_point(b.centroid()));
+    /// assert!(Aabb::EMPTY.centroid().is_nan()); // +inf + -inf
+    /// ```
     #[inline]
     pub fn centroid(&self) -> Vec3 {
         (self.min + self.max) * 0.5
@@ -139,6 +222,13 @@ impl Aabb {
 
     /// The axis (0 = x, 1 = y, 2 = z) of largest extent; ties go to the lower axis; 0 for an
     /// empty box.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// assert_eq!(Aabb::new(Vec3::ZERO, Vec3::new(1.0, 3.0, 2.0)).longest_axis(), 1);
+    /// assert_eq!(Aabb::new(Vec3::ZERO, Vec3::new(2.0, 1.0, 2.0)).longest_axis(), 0); // x and z tie
+    /// assert_eq!(Aabb::EMPTY.longest_axis(), 0);
+    /// ```
     #[inline]
     pub fn longest_axis(&self) -> usize {
         let d = self.extent();
@@ -152,12 +242,30 @@ impl Aabb {
     }
 
     /// `true` if `p` lies in the closed box.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+    /// assert!(b.contains_point(Vec3::ONE)); // a corner: the box is closed
+    /// assert!(b.contains_point(Vec3::new(-0.0, 0.5, 0.5))); // -0.0 == 0.0
+    /// assert!(!b.contains_point(Vec3::new(0.5, 1.5, 0.5)));
+    /// assert!(!b.contains_point(Vec3::new(f32::NAN, 0.5, 0.5)));
+    /// ```
     #[inline]
     pub fn contains_point(&self, p: Vec3) -> bool {
         self.min.cmple(p).all() && p.cmple(self.max).all()
     }
 
     /// `true` if `other` lies in the closed box (an empty `other` is contained in everything).
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3};
+    /// let b = Aabb::new(Vec3::ZERO, Vec3::splat(2.0));
+    /// assert!(b.contains(&b)); // closed: a box contains itself
+    /// assert!(b.contains(&Aabb::new(Vec3::ONE, Vec3::ONE)));
+    /// assert!(!b.contains(&Aabb::new(Vec3::ONE, Vec3::splat(3.0)))); // sticks out
+    /// assert!(Aabb::EMPTY.contains(&Aabb::EMPTY) && !Aabb::EMPTY.contains(&b));
+    /// ```
     #[inline]
     pub fn contains(&self, other: &Aabb) -> bool {
         other.is_empty() || (self.min.cmple(other.min).all() && other.max.cmple(self.max).all())

@@ -2,6 +2,14 @@ use bytemuck::PodCastError;
 use glam::Vec3;
 
 /// A triangle as its three vertices.
+///
+/// ```
+/// use strahl::{Vec3, geometry::Triangle};
+/// let t: Triangle = [Vec3::ZERO, Vec3::X * 2.0, Vec3::Y];
+/// let area = (t[1] - t[0]).cross(t[2] - t[0]).length() / 2.0;
+/// assert_eq!(area, 1.0);
+/// assert_eq!(core::mem::size_of::<Triangle>(), 36); // packed: nine `f32`s, no padding
+/// ```
 pub type Triangle = [Vec3; 3];
 
 /// `true` if no ray can hit `tri`: a vertex is not finite, or the cross product of its edges
@@ -28,6 +36,17 @@ pub fn is_degenerate(tri: &Triangle) -> bool {
 }
 
 /// Errors from reading geometry out of byte buffers.
+///
+/// ```
+/// use strahl::geometry::{GeometryError, TriangleSoup};
+/// let words = [0u32; 10];
+/// let bytes: &[u8] = bytemuck::cast_slice(&words); // 40 bytes, 4-byte aligned
+/// let err = TriangleSoup::from_bytes(bytes).unwrap_err();
+/// assert_eq!(err, GeometryError::BadLength { what: "triangles", len: 40, element: 36 });
+/// assert_eq!(err.to_string(), "triangles: 40 bytes is not a multiple of the 36-byte element");
+/// let err = TriangleSoup::from_bytes(&bytes[1..37]).unwrap_err();
+/// assert_eq!(err, GeometryError::Misaligned { what: "triangles" });
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GeometryError {
     /// The byte buffer's length is not a multiple of the element size.
@@ -73,15 +92,54 @@ fn cast<'a, T: bytemuck::Pod>(what: &'static str, bytes: &'a [u8]) -> Result<&'a
 /// Read access to a set of triangles, however they are stored.
 ///
 /// Builders and brute-force references take `&impl Triangles`.
+///
+/// ```
+/// use strahl::{Vec3, geometry::{Triangles, TriangleSoup}};
+/// // One function for every storage, `[Triangle]` included.
+/// fn total_area<T: Triangles + ?Sized>(tris: &T) -> f32 {
+///     let area = |[a, b, c]: [Vec3; 3]| (b - a).cross(c - a).length() / 2.0;
+///     (0..tris.len()).filter_map(|i| tris.triangle(i)).map(area).sum()
+/// }
+/// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::ZERO, Vec3::X * 2.0, Vec3::Z * 2.0]];
+/// assert_eq!(total_area(&tris[..]), 2.5);
+/// assert_eq!(total_area(&TriangleSoup::new(&tris)), 2.5);
+/// ```
 pub trait Triangles {
     /// Number of triangles (including invalid ones).
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::{IndexedMesh, Triangles}};
+    /// let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    /// let indices = [[0, 1, 2], [0, 1, 7]];
+    /// let mesh = IndexedMesh::new(&positions, &indices);
+    /// assert_eq!(mesh.len(), 2); // triangle 1 refers to a missing vertex 7 but still counts
+    /// assert_eq!(mesh.triangle(1), None);
+    /// ```
     fn len(&self) -> usize;
     /// `true` if there are no triangles.
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::{Triangle, TriangleSoup, Triangles}};
+    /// let none: [Triangle; 0] = [];
+    /// assert!(TriangleSoup::new(&none).is_empty());
+    /// let one = [[Vec3::ZERO; 3]]; // degenerate, but still a triangle
+    /// assert!(!TriangleSoup::new(&one).is_empty());
+    /// ```
     fn is_empty(&self) -> bool {
         self.len() == 0
     }
     /// Triangle `i`, or `None` if it cannot be formed (an index out of range).
     /// Out-of-range `i` also gives `None`.
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::{IndexedMesh, Triangles}};
+    /// let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    /// let indices = [[2, 1, 0], [0, 1, 3]];
+    /// let mesh = IndexedMesh::new(&positions, &indices);
+    /// assert_eq!(mesh.triangle(0), Some([Vec3::Y, Vec3::X, Vec3::ZERO])); // vertex order kept
+    /// assert_eq!(mesh.triangle(1), None); // there is no vertex 3
+    /// assert_eq!(mesh.triangle(2), None); // there is no triangle 2
+    /// ```
     fn triangle(&self, i: usize) -> Option<Triangle>;
     /// Asks the cache for triangle `i` ahead of a [`triangle`](Self::triangle) call: a hint for
     /// code that reads the triangles in an order of its own (the BVH8 collapse reads them leaf by
@@ -127,12 +185,33 @@ pub struct IndexedMesh<'a> {
 
 impl<'a> IndexedMesh<'a> {
     /// Borrows positions and indices.
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::{IndexedMesh, Triangles}};
+    /// // A unit square as two triangles sharing the diagonal 0-2.
+    /// let positions = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
+    /// let indices = [[0, 1, 2], [0, 2, 3]];
+    /// let mesh = IndexedMesh::new(&positions, &indices);
+    /// assert_eq!(mesh.len(), 2);
+    /// assert_eq!(mesh.triangle(1), Some([Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0), Vec3::Y]));
+    /// ```
     pub fn new(positions: &'a [Vec3], indices: &'a [[u32; 3]]) -> Self {
         Self { positions, indices }
     }
 
     /// Views byte buffers of packed `[f32; 3]` positions and `[u32; 3]` indices (native endian,
     /// 4-byte aligned) without copying.
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::{GeometryError, IndexedMesh, Triangles}};
+    /// let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    /// let indices = [[0u32, 1, 2]];
+    /// let (p, i): (&[u8], &[u8]) = (bytemuck::cast_slice(&positions), bytemuck::cast_slice(&indices));
+    /// let mesh = IndexedMesh::from_bytes(p, i).unwrap();
+    /// assert_eq!(mesh.triangle(0), Some(positions));
+    /// let err = IndexedMesh::from_bytes(p, &i[..8]).unwrap_err(); // two indices, not a triangle
+    /// assert_eq!(err, GeometryError::BadLength { what: "indices", len: 8, element: 12 });
+    /// ```
     pub fn from_bytes(positions: &'a [u8], indices: &'a [u8]) -> Result<Self, GeometryError> {
         Ok(Self {
             positions: cast("positions", positions)?,
@@ -180,11 +259,30 @@ pub struct TriangleSoup<'a> {
 
 impl<'a> TriangleSoup<'a> {
     /// Borrows triangles.
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::{TriangleSoup, Triangles}};
+    /// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::Z, Vec3::X, Vec3::Y]];
+    /// let soup = TriangleSoup::new(&tris);
+    /// assert_eq!(soup.len(), 2);
+    /// assert_eq!(soup.triangle(1), Some(tris[1]));
+    /// assert_eq!(soup.triangle(2), None);
+    /// ```
     pub fn new(triangles: &'a [Triangle]) -> Self {
         Self { triangles }
     }
 
     /// Views a byte buffer of packed `[[f32; 3]; 3]` triangles without copying.
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::{GeometryError, TriangleSoup, Triangles}};
+    /// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::Z, Vec3::X, Vec3::Y]];
+    /// let bytes: &[u8] = bytemuck::cast_slice(&tris); // 72 bytes
+    /// let soup = TriangleSoup::from_bytes(bytes).unwrap();
+    /// assert_eq!((soup.len(), soup.triangle(1)), (2, Some(tris[1])));
+    /// let err = TriangleSoup::from_bytes(&bytes[4..]).unwrap_err(); // 68 bytes
+    /// assert_eq!(err, GeometryError::BadLength { what: "triangles", len: 68, element: 36 });
+    /// ```
     pub fn from_bytes(bytes: &'a [u8]) -> Result<Self, GeometryError> {
         Ok(Self {
             triangles: cast("triangles", bytes)?,

@@ -111,8 +111,20 @@ use crate::math::{Lane, f32x8, max_l, min_l, u32x8};
 use glam::Vec3;
 
 /// Bits per axis of a 30-bit code ([`morton30_scalar`] and friends).
+///
+/// ```
+/// use strahl::geometry::morton::{BITS_PER_AXIS_30, MORTON30_MAX};
+/// assert_eq!(3 * BITS_PER_AXIS_30, 30);
+/// assert_eq!(MORTON30_MAX, (1 << (3 * BITS_PER_AXIS_30)) - 1);
+/// ```
 pub const BITS_PER_AXIS_30: u32 = 10;
 /// Bits per axis of a 63-bit code ([`morton63_scalar`] and friends).
+///
+/// ```
+/// use strahl::{Aabb, Vec3, geometry::morton::{BITS_PER_AXIS_63, MortonQuantizer}};
+/// assert_eq!(3 * BITS_PER_AXIS_63, 63);
+/// assert_eq!(MortonQuantizer::new63(&Aabb::new(Vec3::ZERO, Vec3::ONE)).bits(), BITS_PER_AXIS_63);
+/// ```
 pub const BITS_PER_AXIS_63: u32 = 21;
 /// The largest 30-bit code, that of the maximum corner: `0x3FFF_FFFF`.
 ///

@@ -36,16 +36,45 @@ use super::{Hit, Triangle};
 use glam::Vec3;
 
 /// Below this magnitude a coordinate is offset by a fixed amount instead of in ULPs.
+///
+/// ```
+/// use strahl::{Vec3, geometry::offset::{OFFSET_FLOAT_SCALE, OFFSET_ORIGIN, offset_origin}};
+/// let near = Vec3::new(OFFSET_ORIGIN / 2.0, 0.0, 0.0);
+/// assert_eq!(offset_origin(near, Vec3::X).x, near.x + OFFSET_FLOAT_SCALE); // fixed step
+/// let far = Vec3::new(OFFSET_ORIGIN, 0.0, 0.0);
+/// assert_ne!(offset_origin(far, Vec3::X).x, far.x + OFFSET_FLOAT_SCALE); // ULP step
+/// ```
 pub const OFFSET_ORIGIN: f32 = 1.0 / 32.0;
 /// The fixed offset near the origin, per unit of the normal.
+///
+/// ```
+/// use strahl::{Vec3, geometry::offset::{OFFSET_FLOAT_SCALE, offset_origin}};
+/// let q = offset_origin(Vec3::ZERO, Vec3::new(0.0, -2.0, 0.0)); // the normal is normalised
+/// assert_eq!(q, Vec3::new(0.0, -OFFSET_FLOAT_SCALE, 0.0));
+/// ```
 pub const OFFSET_FLOAT_SCALE: f32 = 1.0 / 65536.0;
 /// ULPs per unit of the normal elsewhere.
+///
+/// ```
+/// use strahl::{Vec3, geometry::offset::{OFFSET_INT_SCALE, offset_origin}};
+/// let p = Vec3::new(1.0, 5.0, -7.0);
+/// let q = offset_origin(p, Vec3::X);
+/// assert_eq!(q.x.to_bits() - p.x.to_bits(), OFFSET_INT_SCALE as u32);
+/// assert_eq!((q.y, q.z), (p.y, p.z)); // no normal there, no offset
+/// ```
 pub const OFFSET_INT_SCALE: f32 = 256.0;
 
 /// The hit point `(1 - u - v) a + u b + v c` of `hit` on `tri`, from its barycentrics.
 ///
 /// More accurate than `origin + t direction` for a ray that travelled far (see the
 /// [module docs](self)).
+///
+/// ```
+/// use strahl::{Hit, Vec3, geometry::offset::hit_point};
+/// let tri = [Vec3::ZERO, Vec3::new(4.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0)];
+/// let hit = Hit { t: 1.0, u: 0.25, v: 0.5, prim: 0 };
+/// assert_eq!(hit_point(&tri, &hit), Vec3::new(1.0, 1.0, 0.0));
+/// ```
 #[inline]
 pub fn hit_point(tri: &Triangle, hit: &Hit) -> Vec3 {
     let w = 1.0 - hit.u - hit.v;

@@ -2,6 +2,13 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
 /// The invalid index: a [`Hit`] with `prim == INVALID` is a miss.
+///
+/// ```
+/// use strahl::{Hit, geometry::INVALID};
+/// assert_eq!(INVALID, u32::MAX);
+/// let h = Hit { t: 1.0, u: 0.25, v: 0.25, prim: INVALID };
+/// assert!(!h.is_hit()); // `prim` decides, whatever `t` says
+/// ```
 pub const INVALID: u32 = u32::MAX;
 
 /// A ray `origin + t direction` for `t` in the half-open interval `[tmin, tmax)`.
@@ -41,6 +48,13 @@ const _: () = assert!(core::mem::size_of::<Ray>() == 32);
 
 impl Ray {
     /// A ray over `[0, +inf)`.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3};
+    /// let r = Ray::new(Vec3::new(1.0, 2.0, 3.0), Vec3::X);
+    /// assert_eq!((r.tmin, r.tmax), (0.0, f32::INFINITY));
+    /// assert_eq!(r.at(1.5), Vec3::new(2.5, 2.0, 3.0));
+    /// ```
     #[inline]
     pub const fn new(origin: Vec3, direction: Vec3) -> Self {
         Self {
@@ -52,6 +66,15 @@ impl Ray {
     }
 
     /// A ray over `[tmin, tmax)`.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3};
+    /// // A shadow ray towards a light 4 units away, skipping self-hits near t = 0.
+    /// let r = Ray::with_range(Vec3::ZERO, Vec3::Y, 1e-4, 4.0);
+    /// assert!(r.is_valid());
+    /// assert_eq!(r.at(r.tmax), Vec3::new(0.0, 4.0, 0.0));
+    /// assert!(!Ray::with_range(Vec3::ZERO, Vec3::Y, 0.0, f32::NAN).is_valid());
+    /// ```
     #[inline]
     pub const fn with_range(origin: Vec3, direction: Vec3, tmin: f32, tmax: f32) -> Self {
         Self {
@@ -63,12 +86,29 @@ impl Ray {
     }
 
     /// The point at distance `t`.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3};
+    /// let r = Ray::new(Vec3::X, Vec3::new(0.0, 2.0, 0.0)); // not normalised
+    /// assert_eq!(r.at(0.0), r.origin);
+    /// assert_eq!(r.at(1.5), Vec3::new(1.0, 3.0, 0.0)); // t in units of |direction| = 2
+    /// assert_eq!(r.at(-1.0), Vec3::new(1.0, -2.0, 0.0)); // [tmin, tmax) is not checked
+    /// ```
     #[inline]
     pub fn at(&self, t: f32) -> Vec3 {
         self.origin + self.direction * t
     }
 
     /// `true` if kernels may report hits for this ray (see the type's docs).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3};
+    /// assert!(Ray::with_range(Vec3::ZERO, Vec3::X, 0.0, f32::INFINITY).is_valid());
+    /// assert!(!Ray::new(Vec3::ZERO, Vec3::new(-0.0, 0.0, -0.0)).is_valid()); // zero direction
+    /// assert!(!Ray::new(Vec3::new(f32::INFINITY, 0.0, 0.0), Vec3::X).is_valid());
+    /// assert!(!Ray::new(Vec3::ZERO, Vec3::new(1.0, f32::NAN, 0.0)).is_valid());
+    /// assert!(!Ray::with_range(Vec3::ZERO, Vec3::X, f32::NAN, 1.0).is_valid());
+    /// ```
     #[inline]
     pub fn is_valid(&self) -> bool {
         self.origin.is_finite()
@@ -107,6 +147,16 @@ const _: () = assert!(core::mem::size_of::<Hit>() == 16);
 
 impl Hit {
     /// No hit.
+    ///
+    /// ```
+    /// use strahl::{Hit, geometry::INVALID};
+    /// assert_eq!((Hit::NONE.t, Hit::NONE.prim), (f32::INFINITY, INVALID));
+    /// assert_eq!(Hit::default(), Hit::NONE);
+    /// // Every real hit is nearer, so NONE starts a closest-hit search.
+    /// let hits = [Hit { t: 3.0, u: 0.1, v: 0.2, prim: 4 }, Hit { t: 2.0, u: 0.5, v: 0.0, prim: 7 }];
+    /// let best = hits.iter().fold(Hit::NONE, |best, h| if h.t < best.t { *h } else { best });
+    /// assert_eq!(best.prim, 7);
+    /// ```
     pub const NONE: Self = Self {
         t: f32::INFINITY,
         u: 0.0,
@@ -115,6 +165,12 @@ impl Hit {
     };
 
     /// `true` unless this is a miss.
+    ///
+    /// ```
+    /// use strahl::Hit;
+    /// assert!(Hit { t: 0.0, u: 0.0, v: 0.0, prim: 0 }.is_hit()); // t = 0 and prim 0 are a hit
+    /// assert!(!Hit::NONE.is_hit());
+    /// ```
     #[inline]
     pub fn is_hit(&self) -> bool {
         self.prim != INVALID

@@ -34,6 +34,18 @@ use crate::math::{Lane, abs, f32x4, f32x8, gamma, max_l, min_l};
 
 /// Relative widening of the far distance that makes the test conservative: `2 gamma(3)`; the box
 /// is hit when `near <= far + |far| FAR_SLACK`.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, intersect::{PreparedRay, aabb::FAR_SLACK, intersect_aabb_scalar}};
+/// let b = Aabb::new(Vec3::splat(-1.0), Vec3::ONE);
+/// let o = Vec3::new(0.0, 0.0, -5.0);
+/// // The box is entered at t = 4: a ray that ends an ulp before it still touches it...
+/// let short = PreparedRay::new(&Ray::with_range(o, Vec3::Z, 0.0, 4.0f32.next_down()));
+/// assert_eq!(intersect_aabb_scalar(&short, &b), Some(4.0));
+/// // ...but not one that ends more than `|far| FAR_SLACK` before it.
+/// let shorter = PreparedRay::new(&Ray::with_range(o, Vec3::Z, 0.0, 4.0 * (1.0 - 2.0 * FAR_SLACK)));
+/// assert_eq!(intersect_aabb_scalar(&shorter, &b), None);
+/// ```
 pub const FAR_SLACK: f32 = 2.0 * gamma(3);
 
 /// `N` boxes in structure-of-arrays form: `min[axis]` holds lane `i`'s lower bound on `axis`.
@@ -54,12 +66,37 @@ pub struct AabbLanes<L> {
 }
 
 /// Four boxes, SoA.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, intersect::{AabbX4, PreparedRay, intersect_aabb_scalar, intersect_aabb_x4}};
+/// let boxes = [Aabb::new(Vec3::splat(-1.0), Vec3::ONE), Aabb::new(Vec3::splat(2.0), Vec3::splat(3.0))];
+/// let r = PreparedRay::new(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z));
+/// let (near, mask) = intersect_aabb_x4(&r, &AabbX4::from_boxes(&boxes));
+/// assert_eq!(mask, 0b01);
+/// assert_eq!(Some(near.to_array()[0]), intersect_aabb_scalar(&r, &boxes[0])); // the scalar reference's distance
+/// ```
 pub type AabbX4 = AabbLanes<f32x4>;
 /// Eight boxes, SoA.
+///
+/// ```
+/// use strahl::{Aabb, Vec3, intersect::AabbX8};
+/// let boxes: Vec<Aabb> = (0..8).map(|i| Aabb::new(Vec3::ZERO, Vec3::splat(i as f32 + 1.0))).collect();
+/// let lanes = AabbX8::from_boxes(&boxes);
+/// assert!((0..8).all(|i| lanes.get(i) == boxes[i]));
+/// assert_eq!(lanes.max[1].to_array(), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]);
+/// ```
 pub type AabbX8 = AabbLanes<f32x8>;
 
 impl<L: Lane> AabbLanes<L> {
     /// All lanes empty.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::{AabbX8, PreparedRay, intersect_aabb_x8}};
+    /// let b = AabbX8::empty();
+    /// assert!((0..8).all(|i| b.get(i).is_empty()));
+    /// let r = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+    /// assert_eq!(intersect_aabb_x8(&r, &b).1, 0); // empty boxes are never hit
+    /// ```
     pub fn empty() -> Self {
         Self {
             min: [L::splat(f32::INFINITY); 3],
@@ -68,6 +105,14 @@ impl<L: Lane> AabbLanes<L> {
     }
 
     /// Packs up to `N` boxes; lanes past `boxes.len()` are empty. Extra boxes are ignored.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3, intersect::AabbX4};
+    /// let boxes: Vec<Aabb> = (0..6).map(|i| Aabb::new(Vec3::splat(i as f32), Vec3::splat(i as f32 + 1.0))).collect();
+    /// let lanes = AabbX4::from_boxes(&boxes);
+    /// assert_eq!(lanes.min[0].to_array(), [0.0, 1.0, 2.0, 3.0]); // boxes 4 and 5 do not fit
+    /// assert!((0..4).all(|i| lanes.get(i) == boxes[i]));
+    /// ```
     pub fn from_boxes(boxes: &[Aabb]) -> Self {
         let mut lo = [[f32::INFINITY; 8]; 3];
         let mut hi = [[f32::NEG_INFINITY; 8]; 3];
@@ -84,6 +129,12 @@ impl<L: Lane> AabbLanes<L> {
     }
 
     /// Lane `i` as an [`Aabb`].
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3, intersect::AabbX4};
+    /// let b = Aabb::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0));
+    /// assert_eq!(AabbX4::from_boxes(&[Aabb::EMPTY, b]).get(1), b);
+    /// ```
     pub fn get(&self, i: usize) -> Aabb {
         let f = |v: &[L; 3]| glam::Vec3::new(v[0].lane(i), v[1].lane(i), v[2].lane(i));
         Aabb::new(f(&self.min), f(&self.max))
@@ -127,6 +178,20 @@ pub fn intersect_aabb_scalar(ray: &PreparedRay, b: &Aabb) -> Option<f32> {
 }
 
 /// One ray against `N` boxes: entry distances and the bit mask of lanes hit.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, math::f32x8};
+/// use strahl::intersect::{AabbLanes, PreparedRay, aabb::intersect_aabb_lanes, intersect_aabb_scalar};
+/// let boxes: Vec<Aabb> = (0..8)
+///     .map(|i| Aabb::new(Vec3::new(i as f32 - 4.0, -1.0, 0.0), Vec3::new(i as f32 - 3.0, 1.0, 1.0)))
+///     .collect();
+/// let r = PreparedRay::new(&Ray::new(Vec3::new(-5.0, 0.0, -0.5), Vec3::new(1.0, 0.0, 0.2)));
+/// let (near, mask) = intersect_aabb_lanes(&r, &AabbLanes::<f32x8>::from_boxes(&boxes));
+/// assert_eq!(mask, 0b0111_1110); // the ray is within z = 0 ..= 1 for x = -2.5 ..= 2.5
+/// for i in 1..7 {
+///     assert_eq!(Some(near.to_array()[i]), intersect_aabb_scalar(&r, &boxes[i]));
+/// }
+/// ```
 #[inline(always)]
 pub fn intersect_aabb_lanes<L: Lane>(ray: &PreparedRay, b: &AabbLanes<L>) -> (L, u32) {
     let mut near = L::splat(ray.tmin);
@@ -156,6 +221,12 @@ pub fn intersect_aabb_lanes<L: Lane>(ray: &PreparedRay, b: &AabbLanes<L>) -> (L,
 /// The largest `|1 / direction|` the fast slab test uses: a zero (or tiny) direction component
 /// counts as `1e-18`, as in Embree, so that `origin * inv` stays finite
 /// ([`PreparedRay::with_fast_inv`]).
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, aabb::FAST_INV_MAX}};
+/// let r = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::new(1.0, 0.0, -1e-30))).with_fast_inv();
+/// assert_eq!(r.inv_dir, Vec3::new(1.0, FAST_INV_MAX, -FAST_INV_MAX));
+/// ```
 pub const FAST_INV_MAX: f32 = 1e18;
 
 /// The fast slab test, scalar: the entry distance if `ray` hits `b`, else `None`, for a ray
@@ -199,6 +270,17 @@ pub fn intersect_aabb_fast_scalar(ray: &PreparedRay, b: &Aabb) -> Option<f32> {
 
 /// The fast slab test ([`intersect_aabb_fast_scalar`]), one ray against `N` boxes: entry
 /// distances and the bit mask of lanes hit.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, intersect::{AabbX4, PreparedRay}};
+/// use strahl::intersect::aabb::{intersect_aabb_fast_lanes, intersect_aabb_fast_scalar};
+/// let beside = Aabb::new(Vec3::new(2.0, -1.0, -1.0), Vec3::new(3.0, 1.0, 1.0));
+/// let boxes = [Aabb::new(Vec3::splat(-1.0), Vec3::ONE), beside];
+/// let r = PreparedRay::new(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z)).with_fast_inv();
+/// let (near, mask) = intersect_aabb_fast_lanes(&r, &AabbX4::from_boxes(&boxes));
+/// assert_eq!(mask, 0b01); // the second box lies beside the ray
+/// assert_eq!(Some(near.to_array()[0]), intersect_aabb_fast_scalar(&r, &boxes[0]));
+/// ```
 #[inline(always)]
 pub fn intersect_aabb_fast_lanes<L: Lane>(ray: &PreparedRay, b: &AabbLanes<L>) -> (L, u32) {
     let mut near = L::splat(ray.tmin);

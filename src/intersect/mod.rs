@@ -115,6 +115,15 @@ impl PreparedRay {
     }
 
     /// Prepares `ray`. An invalid ray becomes one that hits nothing.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::PreparedRay};
+    /// let r = PreparedRay::new(&Ray::with_range(Vec3::ONE, Vec3::new(2.0, -4.0, 0.5), 0.0, 10.0));
+    /// assert_eq!(r.inv_dir, Vec3::new(0.5, -0.25, 2.0));
+    /// assert_eq!(r.neg, [false, true, false]);
+    /// assert_eq!(r.k[2], 1); // y dominates the direction
+    /// assert_eq!((r.tmin, r.tmax), (0.0, 10.0));
+    /// ```
     #[inline]
     pub fn new(ray: &Ray) -> Self {
         Self::new_for(ray, true)
@@ -194,6 +203,16 @@ impl PreparedRay {
     }
 
     /// A ray that hits nothing: empty interval (`tmin = +inf`, `tmax = -inf`), all else finite.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::{PreparedRay, moller, watertight}};
+    /// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+    /// // Aimed straight at the triangle, but its interval is empty: no kernel reports a hit.
+    /// assert!(PreparedRay::EMPTY.is_empty());
+    /// assert!(watertight::intersect_scalar(&PreparedRay::EMPTY, &tri, 0).is_none());
+    /// assert!(moller::intersect_scalar(&PreparedRay::EMPTY, &tri, 0).is_none());
+    /// assert_eq!(PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::ZERO)), PreparedRay::EMPTY); // an invalid ray
+    /// ```
     pub const EMPTY: Self = Self {
         origin: Vec3::ZERO,
         direction: Vec3::Z,
@@ -206,6 +225,13 @@ impl PreparedRay {
     };
 
     /// `true` if the interval `[tmin, tmax)` is empty (or NaN): no kernel reports a hit.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::PreparedRay};
+    /// assert!(!PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z)).is_empty());
+    /// assert!(PreparedRay::new(&Ray::with_range(Vec3::ZERO, Vec3::Z, 2.0, 2.0)).is_empty()); // `[2, 2)` holds nothing
+    /// assert!(PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::ZERO)).is_empty()); // invalid
+    /// ```
     #[inline]
     pub fn is_empty(&self) -> bool {
         self.tmin.partial_cmp(&self.tmax) != Some(core::cmp::Ordering::Less)

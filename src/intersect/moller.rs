@@ -126,12 +126,32 @@ fn lanes_one_ray<L: Lane>(ray: &PreparedRay, v: &[[L; 3]; 3]) -> (u32, L, L, L) 
 }
 
 /// Mask of the lanes of `tris` hit by `ray` within `[tmin, tmax)`.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX4, moller}};
+/// let tri = |x: f32| [Vec3::new(x - 1.0, -1.0, 2.0), Vec3::new(x + 1.0, -1.0, 2.0), Vec3::new(x, 1.0, 2.0)];
+/// let soa = TriangleX4::pack(&[tri(0.0), tri(5.0), tri(0.0)], &[0, 1, 2]);
+/// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+/// assert_eq!(moller::hit_mask(&ray, &soa), 0b101); // lane 1 lies beside the ray
+/// let short = PreparedRay::new(&Ray::with_range(Vec3::ZERO, Vec3::Z, 0.0, 2.0));
+/// assert_eq!(moller::hit_mask(&short, &soa), 0); // `tmax` is exclusive
+/// ```
 #[inline(always)]
 pub fn hit_mask<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> u32 {
     lanes_one_ray(ray, &tris.v).0 & tris.valid
 }
 
 /// Closest hit of one ray among `N` SoA triangles (ties: lowest lane).
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX8, moller}};
+/// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+/// let tris = [tri(4.0), tri(-1.0), tri(2.5), tri(3.0)];
+/// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+/// let hit = moller::intersect_lanes(&ray, &TriangleX8::pack(&tris, &[10, 11, 12, 13])).unwrap();
+/// assert_eq!((hit.t, hit.prim), (2.5, 12)); // the triangle behind the origin does not count
+/// assert_eq!(Some(hit), moller::intersect_scalar(&ray, &tris[2], 12));
+/// ```
 #[inline(always)]
 pub fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit> {
     let (m, t, u, v) = lanes_one_ray(ray, &tris.v);
@@ -168,12 +188,29 @@ pub fn intersect_x8(ray: &PreparedRay, tris: &TriangleX8) -> Option<Hit> {
 }
 
 /// `true` if `ray` hits any of the 4 triangles within `[tmin, tmax)`.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX4, moller}};
+/// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+/// let soa = TriangleX4::pack(&[tri], &[0]);
+/// assert!(moller::occluded_x4(&PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z)), &soa));
+/// // A shadow ray that ends before the triangle is not blocked.
+/// assert!(!moller::occluded_x4(&PreparedRay::new(&Ray::with_range(Vec3::ZERO, Vec3::Z, 0.0, 1.5)), &soa));
+/// ```
 #[inline]
 pub fn occluded_x4(ray: &PreparedRay, tris: &TriangleX4) -> bool {
     hit_mask(ray, tris) != 0
 }
 
 /// `true` if `ray` hits any of the 8 triangles within `[tmin, tmax)`.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX8, moller}};
+/// let tri = |x: f32| [Vec3::new(x - 1.0, -1.0, 2.0), Vec3::new(x + 1.0, -1.0, 2.0), Vec3::new(x, 1.0, 2.0)];
+/// let soa = TriangleX8::pack(&[tri(-3.0), tri(3.0)], &[0, 1]);
+/// assert!(!moller::occluded_x8(&PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z)), &soa)); // between the two
+/// assert!(moller::occluded_x8(&PreparedRay::new(&Ray::new(Vec3::new(3.0, 0.0, 0.0), Vec3::Z)), &soa));
+/// ```
 #[inline]
 pub fn occluded_x8(ray: &PreparedRay, tris: &TriangleX8) -> bool {
     hit_mask(ray, tris) != 0

@@ -39,8 +39,27 @@ pub struct PreparedPacket<L, const N: usize> {
 }
 
 /// Four rays, SoA.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedPacket4, PreparedRay}, math::Lane};
+/// let rays = [Ray::new(Vec3::ZERO, Vec3::X), Ray::new(Vec3::ZERO, Vec3::ZERO), Ray::new(Vec3::Y, -Vec3::Z)];
+/// let p = PreparedPacket4::new(&rays);
+/// assert_eq!(p.active(), 0b101); // the zero direction and the missing fourth ray never hit
+/// assert_eq!(p.inv_dir[2].lane(2), PreparedRay::new(&rays[2]).inv_dir.z);
+/// ```
 pub type PreparedPacket4 = PreparedPacket<f32x4, 4>;
 /// Eight rays, SoA.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedPacket8, PreparedRay}, math::Lane};
+/// let rays: Vec<Ray> = (0..8).map(|i| Ray::new(Vec3::ZERO, Vec3::new(1.0, 0.1 * i as f32, 2.0))).collect();
+/// let p = PreparedPacket8::new(&rays);
+/// assert_eq!(p.active(), 0xff);
+/// for (i, r) in rays.iter().enumerate() {
+///     assert_eq!(p.inv_dir[1].lane(i), PreparedRay::new(r).inv_dir.y); // lane i is ray i
+/// }
+/// assert_eq!(p.k_uniform, Some(PreparedRay::new(&rays[0]).k)); // z dominates every direction
+/// ```
 pub type PreparedPacket8 = PreparedPacket<f32x8, 8>;
 
 impl<L: Lane, const N: usize> PreparedPacket<L, N> {
@@ -62,6 +81,16 @@ impl<L: Lane, const N: usize> PreparedPacket<L, N> {
     }
 
     /// Transposes up to `N` prepared rays; missing lanes are [`PreparedRay::EMPTY`].
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::{PreparedPacket4, PreparedRay}, math::Lane};
+    /// let rays = [Ray::new(Vec3::ZERO, Vec3::Z), Ray::with_range(Vec3::X, Vec3::Z, 0.5, 4.0)];
+    /// let pre: Vec<PreparedRay> = rays.iter().map(PreparedRay::new).collect();
+    /// let p = PreparedPacket4::from_prepared(&pre);
+    /// assert_eq!(p.active(), 0b11); // lanes 2 and 3 are `PreparedRay::EMPTY`
+    /// assert_eq!((p.tmin.lane(1), p.tmax.lane(1)), (0.5, 4.0));
+    /// assert_eq!(p.tmax.lane(0), PreparedPacket4::new(&rays).tmax.lane(0)); // as `new` prepares them
+    /// ```
     pub fn from_prepared(rays: &[PreparedRay]) -> Self {
         let () = Self::_LANES_MATCH;
         // PERF: plain loops into arrays (closures through `dyn Fn` cost about a third of a
@@ -106,6 +135,16 @@ impl<L: Lane, const N: usize> PreparedPacket<L, N> {
     }
 
     /// Mask of lanes whose interval `[tmin, tmax)` is not empty.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::PreparedPacket4};
+    /// let rays = [
+    ///     Ray::new(Vec3::ZERO, Vec3::Z),
+    ///     Ray::with_range(Vec3::ZERO, Vec3::Z, 1.0, 1.0), // `[1, 1)` is empty
+    ///     Ray::new(Vec3::X, Vec3::Z),
+    /// ];
+    /// assert_eq!(PreparedPacket4::new(&rays).active(), 0b101); // lane 3 is unused
+    /// ```
     pub fn active(&self) -> u32 {
         self.tmin.lt(self.tmax).bitmask()
     }

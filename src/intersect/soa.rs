@@ -33,8 +33,30 @@ pub struct TriangleLanes<L, const N: usize> {
 }
 
 /// Four triangles, SoA.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX4, watertight}};
+/// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+/// let tris = [tri(4.0), tri(2.0), tri(3.0)];
+/// let soa = TriangleX4::pack(&tris, &[]);
+/// let ray = PreparedRay::new(&Ray::new(Vec3::new(0.1, 0.2, 0.0), Vec3::Z));
+/// let scalar = (0..3).filter_map(|i| watertight::intersect_scalar(&ray, &tris[i], i as u32));
+/// let best = scalar.min_by(|a, b| a.t.total_cmp(&b.t));
+/// assert_eq!(watertight::intersect_x4(&ray, &soa), best); // the scalar loop's closest hit
+/// assert_eq!(best.map(|h| h.prim), Some(1));
+/// ```
 pub type TriangleX4 = TriangleLanes<f32x4, 4>;
 /// Eight triangles, SoA.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX8, moller}};
+/// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+/// let tris: Vec<_> = (0..10).map(|i| tri(10.0 - i as f32)).collect();
+/// let soa = TriangleX8::pack(&tris, &[]);
+/// assert_eq!(soa.valid, 0xff); // the first 8; the rest do not fit
+/// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+/// assert_eq!(moller::intersect_x8(&ray, &soa).map(|h| (h.t, h.prim)), Some((3.0, 7)));
+/// ```
 pub type TriangleX8 = TriangleLanes<f32x8, 8>;
 
 impl<L: Lane, const N: usize> TriangleLanes<L, N> {
@@ -42,6 +64,14 @@ impl<L: Lane, const N: usize> TriangleLanes<L, N> {
 
     /// Packs up to `N` triangles with their primitive indices (`prims[i]` for `tris[i]`; missing
     /// indices default to the position `i`). Unused lanes are zero and invalid.
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::INVALID, intersect::TriangleX4};
+    /// let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    /// let soa = TriangleX4::pack(&[t, t, t], &[7]);
+    /// assert_eq!(soa.prim, [7, 1, 2, INVALID]); // missing indices: the lane's position
+    /// assert_eq!(soa.valid, 0b111);
+    /// ```
     pub fn pack(tris: &[Triangle], prims: &[u32]) -> Self {
         let () = Self::_LANES_MATCH;
         let mut c = [[[0.0f32; 8]; 3]; 3];
@@ -66,6 +96,14 @@ impl<L: Lane, const N: usize> TriangleLanes<L, N> {
     }
 
     /// Triangle of lane `i`.
+    ///
+    /// ```
+    /// use strahl::{Vec3, intersect::TriangleX8};
+    /// let tris = [[Vec3::new(0.1, 0.2, 0.3), Vec3::X, Vec3::Y], [Vec3::ONE, Vec3::NEG_ONE, Vec3::Z]];
+    /// let soa = TriangleX8::pack(&tris, &[]);
+    /// assert_eq!((soa.get(0), soa.get(1)), (tris[0], tris[1])); // bit for bit
+    /// assert_eq!(soa.get(5), [Vec3::ZERO; 3]); // an unused lane
+    /// ```
     pub fn get(&self, i: usize) -> Triangle {
         self.v
             .map(|vtx| Vec3::new(vtx[0].lane(i), vtx[1].lane(i), vtx[2].lane(i)))
@@ -74,6 +112,17 @@ impl<L: Lane, const N: usize> TriangleLanes<L, N> {
 
 /// Per-lane hit records of a packet kernel: lane `i` is meaningful where the packet's hit mask has
 /// bit `i` set (`prim[i] != INVALID`).
+///
+/// ```
+/// use strahl::{Ray, Vec3, geometry::INVALID, intersect::{HitLanes, PreparedPacket4, moller}, math::Lane};
+/// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+/// let rays = [Ray::new(Vec3::ZERO, Vec3::Z), Ray::new(Vec3::new(5.0, 0.0, 0.0), Vec3::Z)];
+/// let (mut packet, mut hits) = (PreparedPacket4::new(&rays), HitLanes::default());
+/// assert_eq!(hits.prim, [INVALID; 4]);
+/// assert_eq!(moller::intersect_packet(&mut packet, &tri, 9, &mut hits), 0b01);
+/// assert_eq!((hits.prim[0], hits.t.lane(0)), (9, 2.0));
+/// assert_eq!((hits.prim[1], hits.t.lane(1)), (INVALID, f32::INFINITY)); // lane 1 passed beside it
+/// ```
 #[derive(Clone, Copy, Debug)]
 pub struct HitLanes<L, const N: usize> {
     /// Hit distances (`+inf` where no hit).
@@ -99,6 +148,17 @@ impl<L: Lane, const N: usize> Default for HitLanes<L, N> {
 
 impl<L: Lane, const N: usize> HitLanes<L, N> {
     /// Lane `i` as a [`Hit`] ([`Hit::NONE`] where no hit).
+    ///
+    /// ```
+    /// use strahl::{Hit, Ray, Vec3, intersect::{HitLanes, PreparedPacket4, PreparedRay, watertight}};
+    /// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+    /// let rays = [Ray::new(Vec3::new(0.1, 0.2, 0.0), Vec3::Z), Ray::new(Vec3::new(5.0, 0.0, 0.0), Vec3::Z)];
+    /// let (mut packet, mut hits) = (PreparedPacket4::new(&rays), HitLanes::default());
+    /// watertight::intersect_packet(&mut packet, &tri, 9, &mut hits);
+    /// let scalar = watertight::intersect_scalar(&PreparedRay::new(&rays[0]), &tri, 9);
+    /// assert_eq!(Some(hits.get(0)), scalar);
+    /// assert_eq!(hits.get(1), Hit::NONE);
+    /// ```
     pub fn get(&self, i: usize) -> Hit {
         if self.prim[i] == INVALID {
             return Hit::NONE;

@@ -144,12 +144,31 @@ fn lanes_one_ray<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLane
 }
 
 /// Mask of the lanes of `tris` hit by `ray` within `[tmin, tmax)`.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX8, watertight}};
+/// // Four triangles around the vertex (0, 0, 2), one per quadrant; a ray exactly through it.
+/// let quad = |sx: f32, sy: f32| [Vec3::new(0.0, 0.0, 2.0), Vec3::new(sx, 0.0, 2.0), Vec3::new(0.0, sy, 2.0)];
+/// let soa = TriangleX8::pack(&[quad(1.0, 1.0), quad(-1.0, 1.0), quad(-1.0, -1.0), quad(1.0, -1.0)], &[]);
+/// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+/// assert_ne!(watertight::hit_mask(&ray, &soa), 0); // no crack at the shared vertex
+/// ```
 #[inline(always)]
 pub fn hit_mask<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> u32 {
     lanes_one_ray(ray, tris).0
 }
 
 /// Closest hit of one ray among `N` SoA triangles (ties: lowest lane).
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX4, watertight}};
+/// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+/// let tris = [tri(3.0), tri(2.0), tri(2.0)];
+/// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+/// let hit = watertight::intersect_lanes(&ray, &TriangleX4::pack(&tris, &[5, 6, 7])).unwrap();
+/// assert_eq!((hit.t, hit.prim), (2.0, 6)); // a tie at t = 2: the lower lane
+/// assert_eq!(Some(hit), watertight::intersect_scalar(&ray, &tris[1], 6));
+/// ```
 #[inline(always)]
 pub fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit> {
     let (m, t, u, v) = lanes_one_ray(ray, tris);
@@ -188,12 +207,31 @@ pub fn intersect_x8(ray: &PreparedRay, tris: &TriangleX8) -> Option<Hit> {
 }
 
 /// `true` if `ray` hits any of the 4 triangles within `[tmin, tmax)`.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX4, watertight}};
+/// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+/// let soa = TriangleX4::pack(&[tri], &[0]);
+/// assert!(watertight::occluded_x4(&PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z)), &soa));
+/// // Both windings are hit; a ray pointing away is not.
+/// assert!(watertight::occluded_x4(&PreparedRay::new(&Ray::new(Vec3::new(0.0, 0.0, 4.0), -Vec3::Z)), &soa));
+/// assert!(!watertight::occluded_x4(&PreparedRay::new(&Ray::new(Vec3::ZERO, -Vec3::Z)), &soa));
+/// ```
 #[inline]
 pub fn occluded_x4(ray: &PreparedRay, tris: &TriangleX4) -> bool {
     hit_mask(ray, tris) != 0
 }
 
 /// `true` if `ray` hits any of the 8 triangles within `[tmin, tmax)`.
+///
+/// ```
+/// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX8, watertight}};
+/// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+/// let soa = TriangleX8::pack(&[tri, [Vec3::NAN; 3]], &[0, 1]); // lane 1 is degenerate: never hit
+/// let from = |x: f32| PreparedRay::new(&Ray::new(Vec3::new(x, 0.0, 0.0), Vec3::Z));
+/// assert!(watertight::occluded_x8(&from(0.0), &soa));
+/// assert!(!watertight::occluded_x8(&from(2.0), &soa));
+/// ```
 #[inline]
 pub fn occluded_x8(ray: &PreparedRay, tris: &TriangleX8) -> bool {
     hit_mask(ray, tris) != 0

@@ -12,6 +12,16 @@ use alloc::vec;
 use alloc::vec::Vec;
 
 /// Why a wide BVH could not be made.
+///
+/// ```
+/// use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh8, CollapseError}};
+/// let tris = strahl::scene::icosphere(1).to_soup();
+/// let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// bvh.prim_indices[0] = tris.len() as u32; // a primitive that does not exist
+/// let err = Bvh8::from_bvh2(&bvh, &tris[..]).unwrap_err();
+/// assert_eq!(err, CollapseError::Malformed);
+/// assert!(err.to_string().contains("does not exist"));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CollapseError {
     /// A node or primitive index of the binary tree is out of range (run
@@ -706,6 +716,17 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
 
     /// [`from_bvh2`](Self::from_bvh2) with the greedy collapse: open the child of largest surface
     /// area until there are `N`, and make every subtree of at most `N` primitives one pack.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// let tris = strahl::scene::icosphere(3).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let greedy = Bvh8::from_bvh2_greedy(&b2, &tris[..]).unwrap();
+    /// let optimal = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// assert!(optimal.nodes().len() < greedy.nodes().len()); // the optimal collapse fills its nodes better
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+    /// assert_eq!(greedy.intersect::<Watertight>(&ray), optimal.intersect::<Watertight>(&ray));
+    /// ```
     pub fn from_bvh2_greedy<P: Triangles + ?Sized>(bvh: &Bvh2, tris: &P) -> Result<Self, CollapseError> {
         Self::collapse::<P, true>(bvh, tris)
     }

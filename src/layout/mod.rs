@@ -53,19 +53,64 @@ use alloc::vec::Vec;
 pub use collapse::CollapseError;
 
 /// Marks a leaf child code.
+///
+/// ```
+/// # use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh8, EMPTY_CHILD, LEAF_BIT}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// for &c in b8.nodes().iter().flat_map(|n| &n.child) {
+///     // Each child is unused, a leaf, or the index of another node.
+///     assert!(c == EMPTY_CHILD || c & LEAF_BIT != 0 || (c as usize) < b8.nodes().len());
+/// }
+/// ```
 pub const LEAF_BIT: u32 = 1 << 31;
 /// An unused child slot.
+///
+/// ```
+/// # use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh4, EMPTY_CHILD}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+/// for node in b4.nodes() {
+///     for (i, &c) in node.child.iter().enumerate() {
+///         assert_eq!(c == EMPTY_CHILD, node.bounds.get(i).is_empty()); // unused slots have empty boxes
+///     }
+/// }
+/// ```
 pub const EMPTY_CHILD: u32 = u32::MAX;
 /// Most packs (of `N` triangles) one leaf child refers to.
+///
+/// ```
+/// use strahl::layout::{LEAF_BIT, MAX_LEAF_PACKS, leaf_packs};
+/// assert_eq!(leaf_packs(LEAF_BIT | 15).1, MAX_LEAF_PACKS); // the most a leaf code can hold
+/// ```
 pub const MAX_LEAF_PACKS: usize = 16;
 
 /// Decodes a leaf child code into `(first pack, number of packs)`.
+///
+/// ```
+/// use strahl::layout::{LEAF_BIT, leaf_packs};
+/// assert_eq!(leaf_packs(LEAF_BIT | 5 << 4 | 2), (5, 3)); // packs 5, 6 and 7
+/// assert_eq!(leaf_packs(LEAF_BIT), (0, 1));
+/// ```
 #[inline(always)]
 pub const fn leaf_packs(code: u32) -> (usize, usize) {
     (((code & !LEAF_BIT) >> 4) as usize, (code & 15) as usize + 1)
 }
 
 /// One node of an `N`-wide BVH: `N` child boxes in SoA lanes and `N` child codes.
+///
+/// ```
+/// use strahl::{Aabb, build::{Bvh2, BuildParams}, layout::Bvh4};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+/// let root = &b4.nodes()[0];
+/// // The root's child boxes together make the box of the whole tree.
+/// let all = (0..4).fold(Aabb::EMPTY, |acc, i| acc.union(&root.bounds.get(i)));
+/// assert_eq!(all, b2.bounds());
+/// ```
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub struct WideNode<L, const N: usize> {
@@ -77,8 +122,18 @@ pub struct WideNode<L, const N: usize> {
 }
 
 /// A 4-wide node (128 bytes).
+///
+/// ```
+/// use strahl::layout::Node4;
+/// assert_eq!((size_of::<Node4>(), align_of::<Node4>()), (128, 64)); // two cache lines
+/// ```
 pub type Node4 = WideNode<f32x4, 4>;
 /// An 8-wide node (256 bytes).
+///
+/// ```
+/// use strahl::layout::Node8;
+/// assert_eq!((size_of::<Node8>(), align_of::<Node8>()), (256, 64)); // four cache lines
+/// ```
 pub type Node8 = WideNode<f32x8, 8>;
 
 const _: () = assert!(core::mem::size_of::<Node4>() == 128);
@@ -87,6 +142,13 @@ const _: () = assert!(core::mem::size_of::<TriangleLanes<f32x8, 8>>() == 8 * 4 *
 
 impl<L: Lane, const N: usize> WideNode<L, N> {
     /// A node with every slot empty.
+    ///
+    /// ```
+    /// use strahl::layout::{EMPTY_CHILD, Node8};
+    /// let n = Node8::empty();
+    /// assert!(n.child.iter().all(|&c| c == EMPTY_CHILD));
+    /// assert!((0..8).all(|i| n.bounds.get(i).is_empty()));
+    /// ```
     pub fn empty() -> Self {
         Self {
             bounds: AabbLanes::empty(),
@@ -103,6 +165,17 @@ impl<L: Lane, const N: usize> WideNode<L, N> {
 /// slices (codes out of range are skipped, a tree deeper than [`MAX_WIDE_DEPTH`] loses the nodes
 /// that do not fit on the stack). Trees from [`BvhWide::from_bvh2`] (and its parallel form) are
 /// always within bounds.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, intersect::AabbX8, layout::{Bvh8Ref, Node8}, traverse::{Moller, wide}};
+/// // A node whose only child is a node index past the end of the slice.
+/// let mut node = Node8::empty();
+/// node.child[0] = 7;
+/// node.bounds = AabbX8::from_boxes(&[Aabb::new(Vec3::splat(-1.0), Vec3::ONE)]);
+/// let view = Bvh8Ref { nodes: &[node], packs: &[] };
+/// let ray = Ray::new(Vec3::new(0.0, 0.0, -3.0), Vec3::Z);
+/// assert_eq!(wide::intersect::<Moller, _, 8>(view, &ray), None); // skipped, no panic
+/// ```
 #[derive(Clone, Copy, Debug)]
 pub struct BvhWideRef<'a, L, const N: usize> {
     /// Nodes; the root is `nodes[0]`.
@@ -112,8 +185,29 @@ pub struct BvhWideRef<'a, L, const N: usize> {
 }
 
 /// A borrowed [`Bvh4`].
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh4, Bvh4Ref}, traverse::{Moller, wide}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+/// // Nodes and packs may come from anywhere (a file, shared memory); here, the tree's own.
+/// let view = Bvh4Ref { nodes: b4.nodes(), packs: b4.packs() };
+/// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+/// assert_eq!(wide::intersect::<Moller, _, 4>(view, &ray), b2.intersect::<Moller, _>(&tris[..], &ray));
+/// ```
 pub type Bvh4Ref<'a> = BvhWideRef<'a, f32x4, 4>;
 /// A borrowed [`Bvh8`].
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Bvh8Ref}, traverse::{Watertight, wide}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// let view: Bvh8Ref = b8.view();
+/// assert!(wide::occluded::<Watertight, _, 8>(view, &Ray::new(Vec3::ZERO, Vec3::new(0.3, -0.5, 1.0))));
+/// assert!(!wide::occluded::<Watertight, _, 8>(Bvh8Ref { nodes: &[], packs: &[] }, &Ray::new(Vec3::ZERO, Vec3::Z)));
+/// ```
 pub type Bvh8Ref<'a> = BvhWideRef<'a, f32x8, 8>;
 
 /// An `N`-wide BVH over triangles, owning its nodes and packs. Build it with
@@ -128,6 +222,16 @@ pub type Bvh8Ref<'a> = BvhWideRef<'a, f32x8, 8>;
 /// huge pages (the parallel form moves its nodes there at the end), as Embree does with its
 /// trees (measured: about 1.2x on 1M-triangle scenes, whose node and leaf reads miss the TLB on
 /// 4 KiB pages). A hint only; a `clone` is an ordinary allocation.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh4, traverse::{Watertight, intersect_brute_force}};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+/// let ray = Ray::new(Vec3::new(-0.3, 0.2, 4.0), -Vec3::Z);
+/// assert_eq!(b4.intersect::<Watertight>(&ray), intersect_brute_force::<Watertight, _>(&tris[..], &ray));
+/// assert!(b4.depth() < b2.validate(&tris[..]).unwrap().max_depth); // fewer levels than the BVH2
+/// ```
 #[cfg(feature = "alloc")]
 #[derive(Clone, Debug)]
 pub struct BvhWide<L, const N: usize> {
@@ -137,19 +241,63 @@ pub struct BvhWide<L, const N: usize> {
 }
 
 /// A 4-wide BVH (SSE / NEON lanes).
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh4, traverse::Watertight};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+/// assert_eq!(b4.packs().iter().map(|p| p.valid.count_ones()).sum::<u32>(), 320); // each triangle once
+/// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+/// assert_eq!(b4.intersect::<Watertight>(&ray), b2.intersect::<Watertight, _>(&tris[..], &ray));
+/// ```
 #[cfg(feature = "alloc")]
 pub type Bvh4 = BvhWide<f32x4, 4>;
 /// An 8-wide BVH (AVX lanes, or two SSE halves).
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh4, Bvh8}, traverse::Watertight};
+/// let tris = strahl::scene::icosphere(3).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let (b4, b8) = (Bvh4::from_bvh2(&b2, &tris[..]).unwrap(), Bvh8::from_bvh2(&b2, &tris[..]).unwrap());
+/// assert!(b8.nodes().len() < b4.nodes().len()); // wider nodes: fewer of them
+/// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+/// assert_eq!(b8.intersect::<Watertight>(&ray), b4.intersect::<Watertight>(&ray));
+/// ```
 #[cfg(feature = "alloc")]
 pub type Bvh8 = BvhWide<f32x8, 8>;
 
 /// The deepest wide tree traversal handles exactly (root = 1); [`BvhWide::from_bvh2`] (and its
 /// parallel form) refuses deeper ones. The traversal stack holds `MAX_WIDE_DEPTH * (N - 1) + 1` entries.
+///
+/// ```
+/// use strahl::{Aabb, Vec3, build::{Bvh2, Node}, layout::{Bvh8, CollapseError, MAX_WIDE_DEPTH}};
+/// let n = 8 * MAX_WIDE_DEPTH;
+/// let tris: Vec<_> = (0..n).map(|i| [Vec3::ZERO, Vec3::X, Vec3::Y].map(|v| v + Vec3::Z * i as f32)).collect();
+/// let b = Aabb::new(Vec3::ZERO, Vec3::new(1.0, 1.0, n as f32));
+/// // A chain: each interior node has a leaf on the left and the rest of the chain on the right.
+/// let mut nodes = Vec::new();
+/// for i in 0..n - 1 {
+///     nodes.extend([Node::interior(&b, 2 * i + 1), Node::leaf(&b, i, 1)]);
+/// }
+/// nodes.push(Node::leaf(&b, n - 1, 1));
+/// let chain = Bvh2 { nodes, prim_indices: (0..n).collect() };
+/// assert_eq!(Bvh8::from_bvh2(&chain, &tris[..]).unwrap_err(), CollapseError::TooDeep);
+/// ```
 pub const MAX_WIDE_DEPTH: u32 = 72;
 
 #[cfg(feature = "alloc")]
 impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// The borrowed view traversal works on.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Watertight, wide}};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+    /// assert_eq!(wide::intersect::<Watertight, _, 8>(b8.view(), &ray), b8.intersect::<Watertight>(&ray));
+    /// ```
     #[inline]
     pub fn view(&self) -> BvhWideRef<'_, L, N> {
         BvhWideRef {
@@ -159,26 +307,71 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     }
 
     /// The nodes; `nodes()[0]` is the root (empty slice for an empty tree).
+    ///
+    /// ```
+    /// # use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh8, LEAF_BIT}};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let interior = b8.nodes().iter().flat_map(|n| n.child).filter(|&c| c & LEAF_BIT == 0).count();
+    /// assert_eq!(interior, b8.nodes().len() - 1); // every node but the root is one node's child
+    /// ```
     pub fn nodes(&self) -> &[WideNode<L, N>] {
         &self.nodes
     }
 
     /// The triangle packs the leaves refer to.
+    ///
+    /// ```
+    /// # use strahl::{build::{Bvh2, BuildParams}, layout::Bvh8};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let mut prims: Vec<u32> = b8.packs().iter()
+    ///     .flat_map(|p| (0..8).filter(|&i| p.valid >> i & 1 == 1).map(|i| p.prim[i]))
+    ///     .collect();
+    /// prims.sort();
+    /// assert_eq!(prims, (0..320).collect::<Vec<u32>>()); // every triangle in exactly one lane
+    /// ```
     pub fn packs(&self) -> &[TriangleLanes<L, N>] {
         &self.packs
     }
 
     /// Depth of the tree (root = 1, 0 when empty).
+    ///
+    /// ```
+    /// use strahl::{build::{Bvh2, BuildParams}, geometry::Triangle, layout::{Bvh8, MAX_WIDE_DEPTH}};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// assert!((2..=MAX_WIDE_DEPTH).contains(&b8.depth())); // 320 triangles need more than one node
+    /// assert_eq!(Bvh8::from_bvh2(&Bvh2::default(), &[] as &[Triangle]).unwrap().depth(), 0);
+    /// ```
     pub fn depth(&self) -> u32 {
         self.depth
     }
 
     /// `true` for a tree without nodes (no valid triangles).
+    ///
+    /// ```
+    /// use strahl::{Vec3, build::{Bvh2, BuildParams}, layout::Bvh4};
+    /// let tris = [[Vec3::ZERO, Vec3::X, Vec3::NAN]]; // invalid: left out by the builder
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// assert!(Bvh4::from_bvh2(&b2, &tris[..]).unwrap().is_empty());
+    /// ```
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()
     }
 
     /// Bytes of nodes and packs.
+    ///
+    /// ```
+    /// # use strahl::{build::{Bvh2, BuildParams}, layout::Bvh8};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// assert_eq!(b8.memory_bytes(), size_of_val(b8.nodes()) + size_of_val(b8.packs()));
+    /// ```
     pub fn memory_bytes(&self) -> usize {
         self.nodes.len() * core::mem::size_of::<WideNode<L, N>>()
             + self.packs.len() * core::mem::size_of::<TriangleLanes<L, N>>()

@@ -51,6 +51,12 @@ pub fn min_l(a: f32, b: f32) -> f32 {
 }
 
 /// Machine epsilon of `f32` as used in error analysis: half an ULP of 1, `2^-24`.
+///
+/// ```
+/// use strahl::math::UNIT_ROUNDOFF;
+/// assert_eq!(UNIT_ROUNDOFF, 2f32.powi(-24));
+/// assert_eq!(1.0 + UNIT_ROUNDOFF, 1.0); // a tie, rounded to even
+/// ```
 pub const UNIT_ROUNDOFF: f32 = f32::EPSILON * 0.5;
 
 /// The error bound `gamma(n) = n u / (1 - n u)` of Higham (and pbrt), `u` = [`UNIT_ROUNDOFF`].
@@ -69,6 +75,13 @@ pub const fn gamma(n: u32) -> f32 {
 }
 
 /// Absolute value of an `f32` without `std` (clears the sign bit).
+///
+/// ```
+/// use strahl::math::abs;
+/// assert_eq!(abs(-2.5), 2.5);
+/// assert!(abs(-0.0).is_sign_positive());
+/// assert_eq!(abs(f32::NEG_INFINITY), f32::INFINITY);
+/// ```
 #[inline(always)]
 pub fn abs(x: f32) -> f32 {
     f32::from_bits(x.to_bits() & 0x7fff_ffff)
@@ -90,6 +103,12 @@ pub fn ceil(x: f32) -> f32 {
 }
 
 /// `true` if the sign bit of `x` is set (also for `-0.0` and negative NaNs).
+///
+/// ```
+/// use strahl::math::sign_bit;
+/// assert!(sign_bit(-1.0) && sign_bit(-0.0) && sign_bit(-f32::NAN));
+/// assert!(!sign_bit(0.0) && !sign_bit(1.0));
+/// ```
 #[inline(always)]
 pub fn sign_bit(x: f32) -> bool {
     x.to_bits() >> 31 != 0

@@ -32,11 +32,25 @@ pub struct Mesh {
 
 impl Mesh {
     /// Borrows the mesh as an [`IndexedMesh`].
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::Triangles, scene};
+    /// let f = scene::fan(4, 1.0);
+    /// let m = f.as_indexed();
+    /// assert_eq!(m.len(), 4);
+    /// assert_eq!(m.triangle(0).unwrap()[0], Vec3::new(0.0, 0.0, 1.0)); // the apex
+    /// ```
     pub fn as_indexed(&self) -> IndexedMesh<'_> {
         IndexedMesh::new(&self.positions, &self.indices)
     }
 
     /// The triangles as a soup (triangles with an out-of-range index are skipped).
+    ///
+    /// ```
+    /// use strahl::{Vec3, scene::Mesh};
+    /// let m = Mesh { positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y], indices: vec![[0, 1, 2], [0, 1, 9]] };
+    /// assert_eq!(m.to_soup(), vec![[Vec3::ZERO, Vec3::X, Vec3::Y]]); // [0, 1, 9] is skipped
+    /// ```
     pub fn to_soup(&self) -> Vec<Triangle> {
         let m = self.as_indexed();
         (0..m.len()).filter_map(|i| m.triangle(i)).collect()
@@ -98,6 +112,13 @@ impl Mesh {
 }
 
 /// An OBJ line that could not be read.
+///
+/// ```
+/// use strahl::scene::{Mesh, ObjError};
+/// let err = Mesh::from_obj("v 0 0 0\nv 1 0 0\nf 1 2 3\n").unwrap_err(); // no vertex 3
+/// assert_eq!(err, ObjError { line: 3 });
+/// assert_eq!(err.to_string(), "OBJ line 3: malformed vertex or face");
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ObjError {
     /// 1-based line number.
@@ -224,11 +245,23 @@ pub struct Rng(u64);
 
 impl Rng {
     /// A generator seeded with `seed`.
+    ///
+    /// ```
+    /// use strahl::scene::Rng;
+    /// let (mut a, mut b) = (Rng::new(42), Rng::new(42));
+    /// assert_eq!([a.u64(), a.u64()], [b.u64(), b.u64()]); // same seed, same sequence
+    /// assert_ne!(Rng::new(1).u64(), Rng::new(2).u64());
+    /// ```
     pub fn new(seed: u64) -> Self {
         Self(seed)
     }
 
     /// The next 64 random bits.
+    ///
+    /// ```
+    /// // The first output of the reference SplitMix64 (Steele, Lea and Flood 2014) seeded with 0.
+    /// assert_eq!(strahl::scene::Rng::new(0).u64(), 0xe220_a839_7b1d_cdaf);
+    /// ```
     pub fn u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.0;
@@ -238,16 +271,40 @@ impl Rng {
     }
 
     /// Uniform in `[0, 1)`.
+    ///
+    /// ```
+    /// use strahl::scene::Rng;
+    /// let bits = Rng::new(3).u64();
+    /// assert_eq!(Rng::new(3).f32(), (bits >> 40) as f32 / 16_777_216.0); // the top 24 bits
+    /// let mut r = Rng::new(3);
+    /// assert!((0..1000).map(|_| r.f32()).all(|x| (0.0..1.0).contains(&x)));
+    /// ```
     pub fn f32(&mut self) -> f32 {
         (self.u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
     }
 
     /// Uniform in `[lo, hi)`.
+    ///
+    /// ```
+    /// let mut r = strahl::scene::Rng::new(5);
+    /// let xs: Vec<f32> = (0..1000).map(|_| r.range(-2.0, 3.0)).collect();
+    /// assert!(xs.iter().all(|x| (-2.0..3.0).contains(x)));
+    /// let mean = xs.iter().sum::<f32>() / 1000.0;
+    /// assert!((mean - 0.5).abs() < 0.2); // the middle of the range
+    /// ```
     pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
         lo + (hi - lo) * self.f32()
     }
 
     /// Uniform on the unit sphere.
+    ///
+    /// ```
+    /// let mut r = strahl::scene::Rng::new(9);
+    /// let vs: Vec<_> = (0..1000).map(|_| r.unit_vector()).collect();
+    /// assert!(vs.iter().all(|v| (v.length() - 1.0).abs() < 1e-5));
+    /// let mean = vs.iter().sum::<strahl::Vec3>() / 1000.0;
+    /// assert!(mean.length() < 0.1); // no preferred direction
+    /// ```
     pub fn unit_vector(&mut self) -> Vec3 {
         let z = self.range(-1.0, 1.0);
         let a = self.range(0.0, core::f32::consts::TAU);
@@ -257,6 +314,13 @@ impl Rng {
 }
 
 /// Which features of a mesh [`aimed_rays`] aims at.
+///
+/// ```
+/// use strahl::scene::{self, Aim};
+/// let m = scene::icosphere(0); // 12 vertices, 30 edges
+/// assert_eq!(scene::aimed_rays(&m, Aim::Vertices, 1, 3.0, 1).len(), 12);
+/// assert_eq!(scene::aimed_rays(&m, Aim::Edges, 1, 3.0, 1).len(), 2 * 30); // two targets an edge
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Aim {
     /// Points on shared edges: each edge's midpoint and one random point.

@@ -13,7 +13,13 @@
 //! ([`intersect_aabb_scalar`](crate::intersect::intersect_aabb_scalar), Ize 2013) on both
 //! children, near child first, the far one pushed with its entry distance and skipped on pop if a
 //! closer hit has been found since (the same comparison the slab test would make with the new
-//! `tmax`, so the result equals brute force exactly).
+//! `tmax`, so the result equals brute force exactly). One exception: the triangle test's `t`
+//! is rounded, and on a stack of coplanar, overlapping triangles (exact ties: a z-fight) that
+//! rounding ranks the tied triangles by a few ulps and can put a `t` just before its box's
+//! entry, beyond the slab test's slack; the traversal then returns another of the tied
+//! triangles, its `t` a few ulps from brute force's (`tests/traverse.rs`: 12,000 nested coplanar
+//! triangles up to 12 times larger than their distance from the ray's origin, 300 rays through
+//! them: 30 ulps apart at most; the error grows with the triangles' size against that distance).
 //!
 //! # The triangle test is chosen at compile time
 //! [`TriangleTest`] is implemented by the marker types [`Moller`] and [`Watertight`]; traversal is
@@ -61,6 +67,14 @@ use crate::intersect::{HitLanes, PreparedPacket, PreparedRay, TriangleLanes, mol
 use crate::math::Lane;
 
 /// Entries of the traversal stack (on the call stack: `STACK_SIZE * 8` bytes).
+///
+/// ```
+/// use strahl::{build::{Bvh2, BuildParams}, traverse::STACK_SIZE};
+/// let tris = strahl::scene::thin_soup(10_000, 1);
+/// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::fastest()).unwrap();
+/// // Near-first traversal pushes at most one node per level below the root.
+/// assert!(bvh.validate(&tris[..]).unwrap().max_depth as usize <= STACK_SIZE + 1);
+/// ```
 pub const STACK_SIZE: usize = 64;
 
 /// The deepest tree (counting the root as depth 1) whose traversal never overflows the stack, and
@@ -68,6 +82,15 @@ pub const STACK_SIZE: usize = 64;
 ///
 /// Near-first traversal pushes at most one node per level below the root, so a tree of depth
 /// `STACK_SIZE + 1` would fit; the builders keep one level in reserve.
+///
+/// ```
+/// use strahl::{Vec3, build::{Bvh2, BuildParams}, traverse::MAX_DEPTH};
+/// let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
+/// let deepest = BuildParams { max_depth: MAX_DEPTH, ..BuildParams::default() };
+/// assert!(Bvh2::build(&tris[..], &deepest).is_ok());
+/// let deeper = BuildParams { max_depth: MAX_DEPTH + 1, ..BuildParams::default() };
+/// assert!(Bvh2::build(&tris[..], &deeper).is_err());
+/// ```
 pub const MAX_DEPTH: u32 = STACK_SIZE as u32;
 
 /// A ray/triangle test, chosen at compile time by a marker type ([`Moller`], [`Watertight`]).
@@ -82,9 +105,25 @@ pub const MAX_DEPTH: u32 = STACK_SIZE as u32;
 /// ```
 pub trait TriangleTest {
     /// A short name for reports and bench labels.
+    ///
+    /// ```
+    /// use strahl::traverse::{Fast, Moller, TriangleTest, Watertight};
+    /// assert_eq!((Moller::NAME, Watertight::NAME), ("moller", "watertight"));
+    /// assert_eq!(<Fast<Moller> as TriangleTest>::NAME, Moller::NAME); // the box test keeps the name
+    /// ```
     const NAME: &'static str;
     /// `true` if the test reads [`PreparedRay::k`] and [`PreparedRay::shear`]; the traversals
     /// skip computing them otherwise ([`PreparedRay::new_for`]). Defaults to `true`.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::PreparedRay, traverse::{Moller, TriangleTest, Watertight}};
+    /// assert!(Watertight::WATERTIGHT && !Moller::WATERTIGHT);
+    /// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+    /// let mut ray = PreparedRay::new(&Ray::new(Vec3::new(0.1, 0.2, 0.0), Vec3::new(0.1, 0.0, 1.0)));
+    /// let full = Moller::intersect(&ray, &tri, 0);
+    /// (ray.k, ray.shear) = (PreparedRay::EMPTY.k, PreparedRay::EMPTY.shear); // skipped for `Moller`
+    /// assert!(full.is_some() && Moller::intersect(&ray, &tri, 0) == full); // Möller never reads them
+    /// ```
     const WATERTIGHT: bool = true;
     /// `true` (the default): the single-ray traversals test boxes with the conservative slab
     /// test ([`intersect_aabb_scalar`](crate::intersect::intersect_aabb_scalar)), which never
@@ -93,15 +132,68 @@ pub trait TriangleTest {
     /// later-found one can be culled: found by fuzzing, seed `fuzz/seeds/bvh/near-tie-edge-origin`.)
     /// `false` for [`Fast`]: the fast one
     /// ([`intersect_aabb_fast_scalar`](crate::intersect::aabb::intersect_aabb_fast_scalar)).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, traverse::{Fast, Moller, TriangleTest}};
+    /// assert!(Moller::CONSERVATIVE_BOXES && !<Fast<Moller> as TriangleTest>::CONSERVATIVE_BOXES);
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z); // far from any box's faces
+    /// let fast = bvh.intersect::<Fast<Moller>, _>(&tris[..], &ray);
+    /// assert!(fast.is_some() && fast == bvh.intersect::<Moller, _>(&tris[..], &ray));
+    /// ```
     const CONSERVATIVE_BOXES: bool = true;
     /// The hit of `ray` with `tri` (reported with `prim`), if any, within `[tmin, tmax)`.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::PreparedRay, traverse::{TriangleTest, Watertight}};
+    /// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+    /// let o = Vec3::new(0.0, 0.0, -1.0);
+    /// let hit = Watertight::intersect(&PreparedRay::new(&Ray::new(o, Vec3::Z)), &tri, 5).unwrap();
+    /// assert_eq!((hit.t, hit.prim), (3.0, 5));
+    /// let short = PreparedRay::new(&Ray::with_range(o, Vec3::Z, 0.0, 3.0));
+    /// assert!(Watertight::intersect(&short, &tri, 5).is_none()); // `tmax` is exclusive
+    /// ```
     fn intersect(ray: &PreparedRay, tri: &Triangle, prim: u32) -> Option<Hit>;
     /// The closest hit among `N` SoA triangles (ties: lowest lane), for wide-BVH leaves.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX8}, traverse::{Moller, TriangleTest, Watertight}};
+    /// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+    /// let leaf = TriangleX8::pack(&[tri(3.0), tri(2.0), tri(2.0)], &[7, 8, 9]);
+    /// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+    /// let hit = Moller::intersect_lanes(&ray, &leaf).unwrap();
+    /// assert_eq!((hit.t, hit.prim), (2.0, 8)); // a tie at t = 2: the lower lane
+    /// assert_eq!(Watertight::intersect_lanes(&ray, &leaf).map(|h| (h.t, h.prim)), Some((2.0, 8)));
+    /// ```
     fn intersect_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> Option<Hit>;
     /// The mask of lanes of `tris` hit within `[tmin, tmax)`, for any-hit queries.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX4}, traverse::{Moller, TriangleTest, Watertight}};
+    /// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+    /// let leaf = TriangleX4::pack(&[tri(3.0), tri(-1.0), tri(2.0)], &[0, 1, 2]);
+    /// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+    /// assert_eq!(Watertight::hit_mask_lanes(&ray, &leaf), 0b101); // lane 1 lies behind the origin
+    /// assert_eq!(Moller::hit_mask_lanes(&ray, &leaf), 0b101);
+    /// ```
     fn hit_mask_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> u32;
     /// `N` rays against one triangle: lanes hit closer than their `tmax` get `hits` and `tmax`
     /// updated; returns the mask of lanes hit (for packet traversal).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, intersect::{HitLanes, PreparedPacket4}, traverse::{TriangleTest, Watertight}};
+    /// let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
+    /// let rays = [
+    ///     Ray::new(Vec3::ZERO, Vec3::Z),
+    ///     Ray::new(Vec3::new(3.0, 0.0, 0.0), Vec3::Z), // beside the triangle
+    ///     Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z),
+    ///     Ray::with_range(Vec3::ZERO, Vec3::Z, 0.0, 1.0), // ends before it
+    /// ];
+    /// let (mut packet, mut hits) = (PreparedPacket4::new(&rays), HitLanes::default());
+    /// assert_eq!(Watertight::intersect_packet(&mut packet, &tri, 0, &mut hits), 0b0101);
+    /// assert_eq!((hits.get(0).t, hits.get(2).t), (2.0, 3.0));
+    /// ```
     fn intersect_packet<L: Lane, const N: usize>(
         rays: &mut PreparedPacket<L, N>,
         tri: &Triangle,
@@ -131,15 +223,46 @@ pub trait TriangleTest {
 /// triangle's plane. Such a hit can lie outside the triangle's box, so brute force may report it
 /// while a BVH traversal, which never opens that box, does not. Use [`Watertight`] where every
 /// traversal must agree with brute force on such rays (`tests/packet_edges.rs` shows both cases).
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, traverse::{Moller, intersect_brute_force}};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+/// let hit = bvh.intersect::<Moller, _>(&tris[..], &ray).unwrap();
+/// // Away from edges and grazing angles, the same hit as brute force.
+/// assert_eq!(Some(hit), intersect_brute_force::<Moller, _>(&tris[..], &ray));
+/// ```
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Moller;
 
 /// Woop, Benthin and Wald's watertight test ([`watertight::intersect_scalar`]).
+///
+/// ```
+/// use strahl::{build::{Bvh2, BuildParams}, scene::{self, Aim}, traverse::Watertight};
+/// let mesh = scene::icosphere(2);
+/// let tris = mesh.as_indexed();
+/// let (bvh, _) = Bvh2::build(&tris, &BuildParams::default()).unwrap();
+/// // Rays aimed exactly at the closed mesh's shared edges: none slips through a crack.
+/// let rays = scene::aimed_rays(&mesh, Aim::Edges, 2, 3.0, 1);
+/// assert!(rays.iter().all(|r| bvh.intersect::<Watertight, _>(&tris, r).is_some()));
+/// ```
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Watertight;
 
 /// A triangle test `T` with the single-ray traversals' box test chosen by `CONSERVATIVE`: the
 /// conservative slab test (`true`, what `T` alone gives) or the fast one (`false`: [`Fast`]).
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, traverse::{Fast, TriangleTest, Watertight, WithBoxes}};
+/// assert!(<WithBoxes<Watertight, true> as TriangleTest>::CONSERVATIVE_BOXES);
+/// assert!(!<Fast<Watertight> as TriangleTest>::CONSERVATIVE_BOXES);
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+/// let conservative = bvh.intersect::<WithBoxes<Watertight, true>, _>(&tris[..], &ray);
+/// assert_eq!(conservative, bvh.intersect::<Watertight, _>(&tris[..], &ray)); // what `Watertight` alone gives
+/// ```
 #[derive(Clone, Copy, Debug, Default)]
 pub struct WithBoxes<T, const CONSERVATIVE: bool>(core::marker::PhantomData<T>);
 

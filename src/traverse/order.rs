@@ -48,6 +48,17 @@ use glam::Vec3A;
 
 /// Bits of the sort key: the top 16 bits of the origin's 30-bit Morton code (about 40 cells per
 /// axis), sorted in two passes of 8 bits.
+///
+/// ```
+/// use strahl::{Ray, Vec3, traverse::order::{KEY_BITS, RayOrder}};
+/// assert_eq!(KEY_BITS, 16); // about 40 cells per axis
+/// let rays = [
+///     Ray::new(Vec3::ONE, Vec3::X),
+///     Ray::new(Vec3::ZERO, Vec3::X),
+///     Ray::new(Vec3::splat(0.999), Vec3::X), // in the first ray's cell: keeps its place after it
+/// ];
+/// assert_eq!(RayOrder::new().compute(&rays), [1, 0, 2]);
+/// ```
 // PERF: 262,144 rays with random origins (Intel Xeon): the order in 2.5 ms with 16 bits, 3.2 ms
 // with 24 and 4.0 ms with 30 (three passes of 1,024 buckets); the 1M sphereflake's shadow and
 // diffuse rays traced no faster in the 24- or 30-bit order.
@@ -55,6 +66,17 @@ pub const KEY_BITS: u32 = 16;
 
 /// The scratch and the result of [`compute`](Self::compute); keep one to reuse its memory from
 /// batch to batch.
+///
+/// ```
+/// use strahl::{Ray, Vec3, traverse::order::RayOrder};
+/// let mut order = RayOrder::new();
+/// for n in [20u32, 10] {
+///     // Origins on a line, each in a cell of its own: the order sorts them along it.
+///     let rays: Vec<Ray> = (0..n).map(|i| Ray::new(Vec3::new((i * 7 % n) as f32, 0.0, 0.0), Vec3::Y)).collect();
+///     let o = order.compute(&rays);
+///     assert!(o.windows(2).all(|w| rays[w[0] as usize].origin.x < rays[w[1] as usize].origin.x));
+/// }
+/// ```
 #[derive(Clone, Debug, Default)]
 pub struct RayOrder {
     items: Vec<Item<u32>>,
@@ -64,6 +86,11 @@ pub struct RayOrder {
 
 impl RayOrder {
     /// An empty order (no memory yet).
+    ///
+    /// ```
+    /// use strahl::traverse::order::RayOrder;
+    /// assert!(RayOrder::new().order().is_empty());
+    /// ```
     pub fn new() -> Self {
         Self::default()
     }
@@ -73,6 +100,16 @@ impl RayOrder {
     /// bounds of the finite ones, NaN to the lower corner); traversal answers them as always.
     ///
     /// A batch longer than `u32::MAX` rays gets the indices `0..u32::MAX` only.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, traverse::order::RayOrder};
+    /// let rays = [
+    ///     Ray::new(Vec3::new(5.0, 0.0, 0.0), Vec3::X),
+    ///     Ray::new(Vec3::ZERO, Vec3::Y),
+    ///     Ray::new(Vec3::new(5.0, 0.1, 0.0), -Vec3::X),
+    /// ];
+    /// assert_eq!(RayOrder::new().compute(&rays), [1, 0, 2]); // by origin, whatever the direction
+    /// ```
     pub fn compute(&mut self, rays: &[Ray]) -> &[u32] {
         let rays = &rays[..rays.len().min(u32::MAX as usize)];
         let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
@@ -113,6 +150,14 @@ impl RayOrder {
     }
 
     /// The order of the last [`compute`](Self::compute) (empty before the first).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, traverse::order::RayOrder};
+    /// let rays = [Ray::new(Vec3::ONE, Vec3::X), Ray::new(Vec3::ZERO, Vec3::X)];
+    /// let mut order = RayOrder::new();
+    /// order.compute(&rays);
+    /// assert_eq!(order.order(), [1, 0]);
+    /// ```
     pub fn order(&self) -> &[u32] {
         &self.order
     }

@@ -71,6 +71,19 @@ pub fn intersect<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L
 /// Closest hit of the prepared ray `r` in the subtree below child code `start` (a node index or a
 /// leaf code; `0` is the whole tree); `r.tmax` shrinks to the hit. The packet traversal's hybrid
 /// mode continues single rays with this.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, intersect::PreparedRay, layout::Bvh8};
+/// use strahl::traverse::{Watertight, wide};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+/// let mut r = PreparedRay::new(&ray);
+/// let hit = wide::intersect_from::<Watertight, _, 8>(b8.view(), 0, &mut r).unwrap(); // from the root
+/// assert_eq!(Some(hit), b8.intersect::<Watertight>(&ray));
+/// assert_eq!(r.tmax, hit.t);
+/// ```
 #[inline]
 pub fn intersect_from<T: TriangleTest, L: Lane, const N: usize>(
     bvh: BvhWideRef<'_, L, N>,
@@ -268,6 +281,17 @@ pub fn intersect_batch_ordered<T: TriangleTest, L: Lane, const N: usize>(
 
 /// `true` if `ray` hits any triangle of the wide BVH `bvh` within `[tmin, tmax)`; stops at the
 /// first hit found.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh4, traverse::{Moller, wide}};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+/// let d = Vec3::new(0.3, -0.5, 1.0);
+/// assert!(wide::occluded::<Moller, _, 4>(b4.view(), &Ray::new(Vec3::ZERO, d))); // from inside the sphere
+/// // A shadow ray to a light inside the sphere is not blocked.
+/// assert!(!wide::occluded::<Moller, _, 4>(b4.view(), &Ray::with_range(Vec3::ZERO, d, 0.0, 0.5)));
+/// ```
 #[inline]
 pub fn occluded<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, ray: &Ray) -> bool {
     let r = prepare::<T>(ray);
@@ -275,6 +299,18 @@ pub fn occluded<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L,
 }
 
 /// [`occluded`] for an already prepared ray.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, intersect::PreparedRay, layout::Bvh8};
+/// use strahl::traverse::{Watertight, wide};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// let mut r = PreparedRay::new(&Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z));
+/// assert!(wide::occluded_prepared::<Watertight, _, 8>(b8.view(), &r));
+/// r.tmax = 1.5; // the sphere starts at about t = 2
+/// assert!(!wide::occluded_prepared::<Watertight, _, 8>(b8.view(), &r));
+/// ```
 #[inline]
 pub fn occluded_prepared<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, r: &PreparedRay) -> bool {
     if r.is_empty() || bvh.nodes.is_empty() {
@@ -557,18 +593,51 @@ fn scan_closest<T: TriangleTest, L: Lane, const N: usize>(
 #[cfg(feature = "alloc")]
 impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     /// Closest hit of `ray` ([`intersect`]).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -4.0), Vec3::Z);
+    /// let hit = b8.intersect::<Watertight>(&ray).unwrap();
+    /// assert!(hit.t > 3.0 && hit.t < 3.1); // the unit sphere's near side, just inside z = -1
+    /// assert_eq!(Some(hit), b2.intersect::<Watertight, _>(&tris[..], &ray));
+    /// ```
     #[inline]
     pub fn intersect<T: TriangleTest>(&self, ray: &Ray) -> Option<Hit> {
         intersect::<T, L, N>(self.view(), ray)
     }
 
     /// Any hit of `ray` ([`occluded`]).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let d = Vec3::new(1.0, 0.2, 0.1);
+    /// assert!(b8.occluded::<Watertight>(&Ray::new(Vec3::ZERO, d))); // from the centre, the sphere is in the way
+    /// assert!(!b8.occluded::<Watertight>(&Ray::new(Vec3::new(2.0, 0.0, 0.0), d))); // outside, facing away
+    /// ```
     #[inline]
     pub fn occluded<T: TriangleTest>(&self, ray: &Ray) -> bool {
         occluded::<T, L, N>(self.view(), ray)
     }
 
     /// Closest hits of a batch: `hits[i]` for `rays[i]` (the shorter length wins).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let rays: Vec<Ray> = (0..5).map(|i| Ray::new(Vec3::new(0.4 * i as f32 - 0.6, 0.1, -3.0), Vec3::Z)).collect();
+    /// let mut hits = [None; 5];
+    /// b8.intersect_batch::<Watertight>(&rays, &mut hits);
+    /// assert!(rays.iter().zip(hits).all(|(r, h)| h == b8.intersect::<Watertight>(r)));
+    /// assert_eq!(hits.map(|h| h.is_some()), [true, true, true, true, false]); // x = 1.0 passes beside
+    /// ```
     pub fn intersect_batch<T: TriangleTest>(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         for (r, h) in rays.iter().zip(hits.iter_mut()) {
             *h = self.intersect::<T>(r);
@@ -576,11 +645,42 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     }
 
     /// Closest hits of a batch of incoherent rays ([`intersect_batch_incoherent`]).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let dirs = [Vec3::new(1.0, 0.1, 0.0), Vec3::new(0.2, -1.0, 0.3), Vec3::new(1.0, 2.0, 3.0), Vec3::NEG_ONE];
+    /// let rays = dirs.map(|d| Ray::new(Vec3::ZERO, d.normalize()));
+    /// let mut hits = [None; 4];
+    /// b8.intersect_batch_incoherent::<Watertight>(&rays, &mut hits);
+    /// for (r, h) in rays.iter().zip(hits) {
+    ///     assert_eq!(h, b8.intersect::<Watertight>(r));
+    ///     assert!(h.is_some_and(|h| h.t > 0.9 && h.t <= 1.0)); // the unit sphere, from its centre
+    /// }
+    /// ```
     pub fn intersect_batch_incoherent<T: TriangleTest>(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         intersect_batch_incoherent::<T, L, N>(self.view(), rays, hits);
     }
 
     /// Any-hit answers of a batch: `occluded[i]` for `rays[i]`.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let d = Vec3::new(0.1, 1.0, 0.2);
+    /// let rays = [
+    ///     Ray::new(Vec3::ZERO, d),
+    ///     Ray::new(Vec3::new(0.0, 2.0, 0.0), d),
+    ///     Ray::with_range(Vec3::ZERO, d, 0.0, 0.5),
+    /// ];
+    /// let mut out = [false; 3];
+    /// b8.occluded_batch::<Watertight>(&rays, &mut out);
+    /// assert_eq!(out, [true, false, false]); // from inside; outside facing away; ending inside
+    /// ```
     pub fn occluded_batch<T: TriangleTest>(&self, rays: &[Ray], occluded: &mut [bool]) {
         for (r, o) in rays.iter().zip(occluded.iter_mut()) {
             *o = self.occluded::<T>(r);
@@ -588,6 +688,20 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     }
 
     /// Any-hit answers of a batch of incoherent rays ([`occluded_batch_incoherent`]).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// // Shadow rays from points around the sphere towards a light at (0, 0, 5).
+    /// let light = Vec3::new(0.0, 0.0, 5.0);
+    /// let rays = [Vec3::new(0.0, 0.0, -2.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.1, -0.2, -1.5)]
+    ///     .map(|p| Ray::with_range(p, light - p, 0.0, 1.0));
+    /// let mut out = [false; 3];
+    /// b8.occluded_batch_incoherent::<Watertight>(&rays, &mut out);
+    /// assert_eq!(out, [true, false, true]); // the sphere shadows the points behind it
+    /// ```
     pub fn occluded_batch_incoherent<T: TriangleTest>(&self, rays: &[Ray], occluded: &mut [bool]) {
         occluded_batch_incoherent::<T, L, N>(self.view(), rays, occluded);
     }
@@ -649,6 +763,21 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     /// [`intersect_batch`](Self::intersect_batch) on `threads` threads (`std`; at least 1, at
     /// most [`MAX_THREADS`](crate::build::MAX_THREADS)): the batch is cut into chunks of 1024
     /// rays taken from a shared counter.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let rays: Vec<Ray> = (0..3000)
+    ///     .map(|i| Ray::new(Vec3::ZERO, Vec3::new((i % 7) as f32 - 3.0, (i % 11) as f32 - 5.0, 1.0)))
+    ///     .collect();
+    /// let (mut one, mut two) = (vec![None; rays.len()], vec![None; rays.len()]);
+    /// b8.intersect_batch::<Watertight>(&rays, &mut one);
+    /// b8.intersect_batch_par::<Watertight>(&rays, &mut two, 2);
+    /// assert_eq!(one, two);
+    /// assert!(one.iter().all(Option::is_some)); // from the centre, every ray leaves through the sphere
+    /// ```
     #[cfg(feature = "std")]
     pub fn intersect_batch_par<T: TriangleTest>(&self, rays: &[Ray], hits: &mut [Option<Hit>], threads: usize)
     where
@@ -658,6 +787,20 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     }
 
     /// [`occluded_batch`](Self::occluded_batch) on `threads` threads (`std`).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let rays: Vec<Ray> = (0..3000)
+    ///     .map(|i| Ray::new(Vec3::new((i % 7) as f32 * 0.3 - 0.9, (i % 11) as f32 * 0.3 - 1.5, -3.0), Vec3::Z))
+    ///     .collect();
+    /// let mut out = vec![false; rays.len()];
+    /// b8.occluded_batch_par::<Watertight>(&rays, &mut out, 2);
+    /// assert!(rays.iter().zip(&out).all(|(r, &o)| o == b8.occluded::<Watertight>(r)));
+    /// assert!(out.contains(&true) && out.contains(&false));
+    /// ```
     #[cfg(feature = "std")]
     pub fn occluded_batch_par<T: TriangleTest>(&self, rays: &[Ray], occluded: &mut [bool], threads: usize)
     where
@@ -693,6 +836,24 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     /// [`occluded_batch_reordered`](Self::occluded_batch_reordered) on `threads` threads (`std`),
     /// as [`intersect_batch_reordered_par`](Self::intersect_batch_reordered_par); each chunk's
     /// walks two at a time, interleaved.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// // Shadow rays from scattered points towards a light at (0, 0, 5).
+    /// let light = Vec3::new(0.0, 0.0, 5.0);
+    /// let rays: Vec<Ray> = (0..3000)
+    ///     .map(|i| Vec3::new((i % 13) as f32 * 0.4 - 2.4, (i % 7) as f32 * 0.4 - 1.2, (i % 5) as f32 - 4.0))
+    ///     .map(|p| Ray::with_range(p, light - p, 0.0, 1.0))
+    ///     .collect();
+    /// let (mut one, mut two) = (vec![false; rays.len()], vec![false; rays.len()]);
+    /// b8.occluded_batch::<Watertight>(&rays, &mut one);
+    /// b8.occluded_batch_reordered_par::<Watertight>(&rays, &mut two, 2);
+    /// assert_eq!(one, two);
+    /// assert!(one.contains(&true) && one.contains(&false));
+    /// ```
     #[cfg(feature = "std")]
     pub fn occluded_batch_reordered_par<T: TriangleTest>(&self, rays: &[Ray], occluded: &mut [bool], threads: usize)
     where

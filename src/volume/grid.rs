@@ -9,8 +9,26 @@ use glam::Vec3;
 /// A voxel type: plain old data that converts to `f32` exactly (`u8`, `u16`) or is `f32`.
 ///
 /// Voxels are read in the machine's byte order (they are cast, not parsed).
+///
+/// ```
+/// use strahl::{Vec3, volume::{Volume, Voxel}};
+/// fn mean<V: Voxel>(v: &Volume<V>) -> f32 {
+///     v.data().iter().map(|&x| x.to_f32()).sum::<f32>() / v.data().len() as f32
+/// }
+/// let bytes = [0u8, 10, 20, 30];
+/// let words = [0u16, 1000, 2000, 3000];
+/// assert_eq!(mean(&Volume::new(&bytes, [4, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap()), 15.0);
+/// assert_eq!(mean(&Volume::new(&words, [2, 2, 1], Vec3::ONE, Vec3::ZERO).unwrap()), 1500.0);
+/// ```
 pub trait Voxel: Pod + Send + Sync + 'static {
     /// The value as `f32`.
+    ///
+    /// ```
+    /// use strahl::volume::Voxel;
+    /// assert_eq!(200u8.to_f32(), 200.0);
+    /// assert_eq!(65535u16.to_f32(), 65535.0); // exact: u16 fits the f32 mantissa
+    /// assert_eq!((-0.5f32).to_f32().to_bits(), (-0.5f32).to_bits());
+    /// ```
     fn to_f32(self) -> f32;
 
     /// The eight corners of eight cells whose x neighbour is the next voxel, converted with
@@ -383,6 +401,14 @@ fn lerp8(a: f32x8, b: f32x8, t: f32x8) -> f32x8 {
 
 impl<'a, V: Voxel> Volume<'a, V> {
     /// Most voxels a volume may have: `2^31 - 1`, so voxel indices fit the `i32` lanes.
+    ///
+    /// ```
+    /// use strahl::{Vec3, volume::{Volume, VolumeError}};
+    /// assert_eq!(Volume::<u8>::MAX_VOXELS, (1 << 31) - 1);
+    /// // 2^16 * 2^15 = 2^31 voxels: one too many (checked before the data length).
+    /// let err = Volume::<u8>::new(&[], [1 << 16, 1 << 15, 1], Vec3::ONE, Vec3::ZERO).unwrap_err();
+    /// assert_eq!(err, VolumeError::TooLarge);
+    /// ```
     pub const MAX_VOXELS: usize = i32::MAX as usize;
 
     /// A volume over `data` (x fastest, then y, then z).
@@ -391,6 +417,17 @@ impl<'a, V: Voxel> Volume<'a, V> {
     /// [`MAX_VOXELS`](Self::MAX_VOXELS); [`VolumeError::SizeMismatch`] if `data.len()` differs from
     /// it; [`VolumeError::InvalidGeometry`] unless `spacing` is finite and positive and `origin`
     /// finite. Zero dimensions with empty `data` make a valid, empty volume.
+    ///
+    /// ```
+    /// use strahl::{Vec3, volume::{Volume, VolumeError}};
+    /// let data = [1.0f32; 6];
+    /// assert!(Volume::new(&data, [3, 2, 1], Vec3::ONE, Vec3::ZERO).is_ok());
+    /// let err = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap_err();
+    /// assert_eq!(err, VolumeError::SizeMismatch { expected: 8, actual: 6 });
+    /// let err = Volume::new(&data, [3, 2, 1], Vec3::new(1.0, 0.0, 1.0), Vec3::ZERO).unwrap_err();
+    /// assert_eq!(err, VolumeError::InvalidGeometry); // zero spacing
+    /// assert!(Volume::<f32>::new(&[], [0, 5, 5], Vec3::ONE, Vec3::ZERO).unwrap().is_empty());
+    /// ```
     pub fn new(data: &'a [V], dims: [u32; 3], spacing: Vec3, origin: Vec3) -> Result<Self, VolumeError> {
         let n = Self::voxel_count(dims)?;
         if data.len() != n {
@@ -466,30 +503,71 @@ impl<'a, V: Voxel> Volume<'a, V> {
     }
 
     /// The voxels, x fastest.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// assert!(core::ptr::eq(v.data(), &data[..])); // borrowed, not copied
+    /// assert_eq!(v.data()[1 + 2 * 1 + 4 * 1], 7.0); // voxel (1, 1, 1)
+    /// ```
     #[inline]
     pub fn data(&self) -> &'a [V] {
         self.data
     }
 
     /// Number of voxels per axis.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 4, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// assert_eq!(v.dims(), [2, 4, 1]);
+    /// assert_eq!(v.dims().iter().product::<u32>() as usize, v.data().len());
+    /// ```
     #[inline]
     pub fn dims(&self) -> [u32; 3] {
         self.dims
     }
 
     /// World distance between neighbouring voxels, per axis.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::new(0.5, 1.0, 2.0), Vec3::ZERO).unwrap();
+    /// assert_eq!(v.spacing(), Vec3::new(0.5, 1.0, 2.0));
+    /// assert_eq!(v.bounds().max, v.spacing()); // two voxels per axis: one spacing apart
+    /// ```
     #[inline]
     pub fn spacing(&self) -> Vec3 {
         self.spacing
     }
 
     /// World position of voxel `(0, 0, 0)`.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::new(-1.0, 2.0, 0.0)).unwrap();
+    /// assert_eq!(v.origin(), Vec3::new(-1.0, 2.0, 0.0));
+    /// assert_eq!(v.sample_scalar(v.origin()), 0.0); // voxel (0, 0, 0)
+    /// ```
     #[inline]
     pub fn origin(&self) -> Vec3 {
         self.origin
     }
 
     /// `true` for a volume without voxels.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// assert!(!Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap().is_empty());
+    /// let empty = Volume::<f32>::new(&[], [4, 0, 4], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// assert!(empty.is_empty());
+    /// assert_eq!(empty.sample_scalar(Vec3::ZERO), 0.0);
+    /// ```
     #[inline]
     pub fn is_empty(&self) -> bool {
         self.data.is_empty()
@@ -497,6 +575,15 @@ impl<'a, V: Voxel> Volume<'a, V> {
 
     /// The box spanned by the voxel centres, `origin ..= origin + (dims - 1) spacing`; empty for an
     /// empty volume.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::splat(0.25), Vec3::new(1.0, 0.0, -1.0)).unwrap();
+    /// assert_eq!((v.bounds().min, v.bounds().max), (Vec3::new(1.0, 0.0, -1.0), Vec3::new(1.25, 0.25, -0.75)));
+    /// let empty = Volume::<f32>::new(&[], [0, 0, 0], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// assert!(empty.bounds().is_empty());
+    /// ```
     pub fn bounds(&self) -> Aabb {
         if self.is_empty() {
             return Aabb::EMPTY;
@@ -506,6 +593,14 @@ impl<'a, V: Voxel> Volume<'a, V> {
     }
 
     /// Voxel `(i, j, k)`, or `None` outside the grid.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// assert_eq!(v.voxel(1, 0, 1), Some(5.0)); // 1 + 2 0 + 4 1
+    /// assert_eq!(v.voxel(0, 2, 0), None);
+    /// ```
     pub fn voxel(&self, i: u32, j: u32, k: u32) -> Option<V> {
         if i >= self.dims[0] || j >= self.dims[1] || k >= self.dims[2] {
             return None;
@@ -515,18 +610,46 @@ impl<'a, V: Voxel> Volume<'a, V> {
     }
 
     /// Local (voxel) coordinates of world point `p`: `(p - origin) / spacing`.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::new(0.5, 2.0, 4.0), Vec3::new(1.0, 1.0, 1.0)).unwrap();
+    /// assert_eq!(v.to_local(Vec3::new(1.25, 2.0, 3.0)), Vec3::new(0.5, 0.5, 0.5));
+    /// assert_eq!(v.to_local(v.origin()), Vec3::ZERO);
+    /// ```
     #[inline]
     pub fn to_local(&self, p: Vec3) -> Vec3 {
         (p - self.origin) * self.inv_spacing
     }
 
     /// `(origin, 1 / spacing)`: local = `(world - origin) * (1 / spacing)`.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::new(0.5, 0.25, 2.0), Vec3::new(3.0, 0.0, -1.0)).unwrap();
+    /// let (o, inv) = v.local_frame();
+    /// assert_eq!((o, inv), (Vec3::new(3.0, 0.0, -1.0), Vec3::new(2.0, 4.0, 0.5)));
+    /// let p = Vec3::new(3.3, 0.1, 0.7);
+    /// assert_eq!((p - o) * inv, v.to_local(p));
+    /// ```
     #[inline]
     pub fn local_frame(&self) -> (Vec3, Vec3) {
         (self.origin, self.inv_spacing)
     }
 
     /// Trilinear sample at world point `p` (clamped to the box); `0` for an empty volume.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::splat(0.5), Vec3::ZERO).unwrap();
+    /// // Trilinear interpolation reproduces the linear field i + 2j + 4k exactly.
+    /// assert_eq!(v.sample_scalar(Vec3::new(0.25, 0.25, 0.25)), 3.5); // local (0.5, 0.5, 0.5)
+    /// assert_eq!(v.sample_scalar(Vec3::new(0.5, 0.0, 0.125)), 2.0); // local (1, 0, 0.25)
+    /// assert_eq!(v.sample_scalar(Vec3::new(-7.0, 0.0, 9.0)), 4.0); // clamped to voxel (0, 0, 1)
+    /// ```
     #[inline]
     pub fn sample_scalar(&self, p: Vec3) -> f32 {
         self.sample_local_scalar(self.to_local(p))
@@ -534,6 +657,19 @@ impl<'a, V: Voxel> Volume<'a, V> {
 
     /// Trilinear samples at eight world points (SoA); lane `i` equals [`sample_scalar`](Self::sample_scalar)
     /// of lane `i`'s point bit for bit.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// # use strahl::math::f32x8;
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::splat(0.5), Vec3::new(1.0, 0.0, 0.0)).unwrap();
+    /// let xs = [0.9, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6];
+    /// let p = [f32x8::new(xs), f32x8::splat(0.2), f32x8::splat(0.45)];
+    /// let s = v.sample_x8(p).to_array();
+    /// for i in 0..8 {
+    ///     assert_eq!(s[i].to_bits(), v.sample_scalar(Vec3::new(xs[i], 0.2, 0.45)).to_bits());
+    /// }
+    /// ```
     #[inline]
     pub fn sample_x8(&self, p: [f32x8; 3]) -> f32x8 {
         let o = self.origin;
@@ -548,6 +684,14 @@ impl<'a, V: Voxel> Volume<'a, V> {
     /// Trilinear sample at local coordinates `g` (clamped to `[0, dims - 1]`); `0` for an empty
     /// volume. Interpolated in `f32` as `a + (b - a) t`: where two neighbouring voxels differ by more
     /// than `f32::MAX` (values beyond about `±1.7e38`) the sample is infinite.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, volume::Volume};
+    /// # let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let v = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// assert_eq!(v.sample_local_scalar(Vec3::new(0.5, 0.25, 0.75)), 0.5 + 0.5 + 3.0);
+    /// assert_eq!(v.sample_local_scalar(Vec3::new(5.0, -1.0, f32::NAN)), 1.0); // clamped: NaN to 0
+    /// ```
     #[inline]
     pub fn sample_local_scalar(&self, g: Vec3) -> f32 {
         if self.data.is_empty() {

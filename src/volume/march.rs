@@ -10,12 +10,47 @@ use glam::Vec3;
 
 /// Default [`MarchParams::max_steps`]: `2^16` samples per ray, enough for a step of a quarter
 /// voxel across the diagonal of a `9000^3` volume.
+///
+/// ```
+/// use strahl::volume::{DEFAULT_MAX_STEPS, MarchParams};
+/// assert_eq!(MarchParams::reference(0.1).max_steps, DEFAULT_MAX_STEPS);
+/// let diagonal = 9000.0 * 3f32.sqrt(); // in voxels
+/// assert!(diagonal / 0.25 < DEFAULT_MAX_STEPS as f32);
+/// ```
 pub const DEFAULT_MAX_STEPS: u32 = 1 << 16;
 
 /// Largest [`MarchParams::max_steps`]: `2^24`, so that every step index is exact in `f32`.
+///
+/// ```
+/// use strahl::volume::{MAX_STEPS_LIMIT, MarchParams, VolumeError};
+/// let p = MarchParams { max_steps: MAX_STEPS_LIMIT, ..MarchParams::fast(0.5) };
+/// assert!(p.validate().is_ok());
+/// assert_eq!((MAX_STEPS_LIMIT - 1) as f32 as u32, MAX_STEPS_LIMIT - 1); // exact
+/// let over = MarchParams { max_steps: MAX_STEPS_LIMIT + 1, ..p };
+/// assert_eq!(over.validate(), Err(VolumeError::InvalidMaxSteps));
+/// ```
 pub const MAX_STEPS_LIMIT: u32 = 1 << 24;
 
 /// Where each step takes its sample.
+///
+/// ```
+/// use strahl::{Aabb, Ray, Vec3, volume::*};
+/// /// Extinction rising linearly with depth: the optical depth over [0, 1] is 1.
+/// struct Ramp;
+/// impl Medium for Ramp {
+///     fn bounds(&self) -> Aabb { Aabb::new(Vec3::ZERO, Vec3::ONE) }
+///     fn lookup(&self, g: Vec3) -> Lookup { Lookup::Sample(Sample { tau: 2.0 * g.z, color: [1.0; 3] }) }
+/// }
+/// let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
+/// let exact = 1.0 - (-1.0f32).exp();
+/// let err = |sampling| {
+///     let p = MarchParams { sampling, ..MarchParams::reference(0.125) };
+///     (integrate_ray(&Ramp, &ray, &p).unwrap().a - exact).abs()
+/// };
+/// assert_eq!(Sampling::default(), Sampling::Midpoint);
+/// assert!(err(Sampling::Midpoint) < 1e-5); // exact for a linear tau
+/// assert!(err(Sampling::Endpoint) > 0.01); // a left sum: first order in dt
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Sampling {
     /// At the start of the step, `t_k = k dt`: a left Riemann sum, first order in `dt`.
@@ -63,6 +98,13 @@ pub struct MarchParams {
 
 impl MarchParams {
     /// The reference: midpoint sampling, no early termination.
+    ///
+    /// ```
+    /// use strahl::volume::{DEFAULT_MAX_STEPS, MarchParams, Sampling};
+    /// let p = MarchParams::reference(0.25);
+    /// assert_eq!((p.step, p.sampling, p.termination), (0.25, Sampling::Midpoint, None));
+    /// assert_eq!(p.max_steps, DEFAULT_MAX_STEPS);
+    /// ```
     pub const fn reference(step: f32) -> Self {
         Self {
             step,
@@ -74,6 +116,23 @@ impl MarchParams {
 
     /// Midpoint sampling, termination at full opacity only: the same image as
     /// [`reference`](Self::reference), faster on opaque volumes.
+    ///
+    /// ```
+    /// # use strahl::{Ray, Vec3, volume::*};
+    /// # let data: Vec<u8> = (0..8 * 8 * 8).map(|i| (i * 37 % 251) as u8).collect();
+    /// # let vol = Volume::new(&data, [8; 3], Vec3::splat(0.25), Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.2], 6.0), TfEntry::new([0.2, 0.5, 1.0], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let rays: Vec<Ray> = (0..11)
+    /// #     .map(|i| Ray::new(Vec3::new(0.1 + 0.15 * i as f32, 0.9, -1.0), Vec3::new(0.0, -0.2, 1.0)))
+    /// #     .collect();
+    /// let (mut a, mut b) = (vec![Rgba::ZERO; 11], vec![Rgba::ZERO; 11]);
+    /// let m = VolumeMedium::new(vol, tf); // rays: 11 rays across an 8^3 volume
+    /// let sr = integrate(&m, &rays, &mut a, &MarchParams::reference(0.05)).unwrap();
+    /// let sq = integrate(&m, &rays, &mut b, &MarchParams::quality(0.05)).unwrap();
+    /// assert!(a.iter().zip(&b).all(|(x, y)| x.bit_eq(y))); // the same image
+    /// assert!(sq.samples <= sr.samples);
+    /// ```
     pub const fn quality(step: f32) -> Self {
         Self {
             termination: Some(0.0),
@@ -83,6 +142,25 @@ impl MarchParams {
 
     /// Midpoint sampling, termination at `1 - A <= 1/256`: an error of at most `max|c| / 256` per
     /// channel, below the resolution of an 8-bit image.
+    ///
+    /// ```
+    /// # use strahl::{Ray, Vec3, volume::*};
+    /// # let data: Vec<u8> = (0..8 * 8 * 8).map(|i| (i * 37 % 251) as u8).collect();
+    /// # let vol = Volume::new(&data, [8; 3], Vec3::splat(0.25), Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.2], 6.0), TfEntry::new([0.2, 0.5, 1.0], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let rays: Vec<Ray> = (0..11)
+    /// #     .map(|i| Ray::new(Vec3::new(0.1 + 0.15 * i as f32, 0.9, -1.0), Vec3::new(0.0, -0.2, 1.0)))
+    /// #     .collect();
+    /// let (mut a, mut b) = (vec![Rgba::ZERO; 11], vec![Rgba::ZERO; 11]);
+    /// let m = VolumeMedium::new(vol, tf); // rays: 11 rays across an 8^3 volume
+    /// integrate(&m, &rays, &mut a, &MarchParams::reference(0.05)).unwrap();
+    /// integrate(&m, &rays, &mut b, &MarchParams::fast(0.05)).unwrap();
+    /// let bound = tf.max_color() / 256.0;
+    /// for (x, y) in a.iter().zip(&b) {
+    ///     assert!((x.r - y.r).abs() <= bound && (x.a - y.a).abs() <= 1.0 / 256.0);
+    /// }
+    /// ```
     pub const fn fast(step: f32) -> Self {
         Self {
             termination: Some(1.0 / 256.0),
@@ -92,6 +170,16 @@ impl MarchParams {
 
     /// Checks every field: [`VolumeError::InvalidStep`], [`VolumeError::InvalidTermination`],
     /// [`VolumeError::InvalidMaxSteps`].
+    ///
+    /// ```
+    /// use strahl::volume::{MarchParams, VolumeError};
+    /// assert_eq!(MarchParams::fast(0.1).validate(), Ok(()));
+    /// assert_eq!(MarchParams::reference(-0.1).validate(), Err(VolumeError::InvalidStep));
+    /// let eps = MarchParams { termination: Some(1.0), ..MarchParams::fast(0.1) };
+    /// assert_eq!(eps.validate(), Err(VolumeError::InvalidTermination)); // must be below 1
+    /// let zero = MarchParams { max_steps: 0, ..MarchParams::fast(0.1) };
+    /// assert_eq!(zero.validate(), Err(VolumeError::InvalidMaxSteps));
+    /// ```
     pub fn validate(&self) -> Result<(), VolumeError> {
         if !(self.step > 0.0 && self.step.is_finite()) {
             return Err(VolumeError::InvalidStep);
@@ -109,6 +197,23 @@ impl MarchParams {
 }
 
 /// Counters of one call of [`integrate_scalar`] / [`integrate_x8`].
+///
+/// ```
+/// # use strahl::{Ray, Vec3, volume::*};
+/// # let data = [1.0f32; 8];
+/// # let vol = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+/// # let table = [TfEntry::new([1.0; 3], 1.0)];
+/// let m = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 1.0).unwrap()); // the unit cube
+/// let rays = [
+///     Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z), // crosses the unit cube: 1 / 0.25 = 4 steps
+///     Ray::new(Vec3::new(5.0, 0.5, -1.0), Vec3::Z), // misses
+/// ];
+/// let mut out = [Rgba::ZERO; 2];
+/// let stats = integrate_scalar(&m, &rays, &mut out, &MarchParams::reference(0.25)).unwrap();
+/// assert_eq!(stats, MarchStats { rays: 1, samples: 4, ..MarchStats::default() });
+/// let cut = MarchParams { max_steps: 3, ..MarchParams::reference(0.25) };
+/// assert_eq!(integrate_scalar(&m, &rays, &mut out, &cut).unwrap().truncated, 1);
+/// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MarchStats {
     /// Rays that overlap the medium with positive length (the others are transparent at no cost).
@@ -477,6 +582,24 @@ pub fn integrate_ray<M: Medium>(m: &M, ray: &Ray, params: &MarchParams) -> Resul
 ///
 /// Errors: bad parameters ([`MarchParams::validate`]), or [`VolumeError::LengthMismatch`] if
 /// `out` is shorter than `rays` (nothing is written then).
+///
+/// ```
+/// # use strahl::{Ray, Vec3, volume::*};
+/// # let data: Vec<u8> = (0..8 * 8 * 8).map(|i| (i * 37 % 251) as u8).collect();
+/// # let vol = Volume::new(&data, [8; 3], Vec3::splat(0.25), Vec3::ZERO).unwrap();
+/// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.2], 6.0), TfEntry::new([0.2, 0.5, 1.0], 1.0)];
+/// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+/// # let rays: Vec<Ray> = (0..11)
+/// #     .map(|i| Ray::new(Vec3::new(0.1 + 0.15 * i as f32, 0.9, -1.0), Vec3::new(0.0, -0.2, 1.0)))
+/// #     .collect();
+/// let m = VolumeMedium::new(vol, tf); // rays: 11 rays across an 8^3 volume
+/// let mut out = vec![Rgba::ZERO; rays.len()];
+/// let p = MarchParams::fast(0.05);
+/// integrate_scalar(&m, &rays, &mut out, &p).unwrap();
+/// assert!(rays.iter().zip(&out).all(|(r, o)| integrate_ray(&m, r, &p).unwrap().bit_eq(o)));
+/// let err = integrate_scalar(&m, &rays, &mut out[..3], &p).unwrap_err();
+/// assert_eq!(err, VolumeError::LengthMismatch { rays: 11, out: 3 });
+/// ```
 pub fn integrate_scalar<M: Medium>(
     m: &M,
     rays: &[Ray],
@@ -787,6 +910,23 @@ pub fn integrate_x8<M: Medium>(
 }
 
 /// Marches `rays[i]` into `out[i]` with the fastest kernel, [`integrate_x8`].
+///
+/// ```
+/// # use strahl::{Ray, Vec3, volume::*};
+/// # let data: Vec<u8> = (0..8 * 8 * 8).map(|i| (i * 37 % 251) as u8).collect();
+/// # let vol = Volume::new(&data, [8; 3], Vec3::splat(0.25), Vec3::ZERO).unwrap();
+/// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.2], 6.0), TfEntry::new([0.2, 0.5, 1.0], 1.0)];
+/// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+/// # let rays: Vec<Ray> = (0..11)
+/// #     .map(|i| Ray::new(Vec3::new(0.1 + 0.15 * i as f32, 0.9, -1.0), Vec3::new(0.0, -0.2, 1.0)))
+/// #     .collect();
+/// let m = VolumeMedium::new(vol, tf); // rays: 11 rays across an 8^3 volume
+/// let (mut a, mut b) = (vec![Rgba::ZERO; 11], vec![Rgba::ZERO; 11]);
+/// let p = MarchParams::quality(0.05);
+/// let sa = integrate(&m, &rays, &mut a, &p).unwrap();
+/// assert_eq!(sa, integrate_scalar(&m, &rays, &mut b, &p).unwrap());
+/// assert!(a.iter().zip(&b).all(|(x, y)| x.bit_eq(y))); // the scalar reference's bits
+/// ```
 #[inline]
 pub fn integrate<M: Medium>(
     m: &M,
@@ -855,6 +995,22 @@ fn march_preintegrated_scalar<V: Voxel>(
 ///
 /// Errors: as [`integrate_scalar`], and [`VolumeError::StepMismatch`] unless `params.step` is
 /// the table's step.
+///
+/// ```
+/// # use strahl::{Ray, Vec3, volume::*};
+/// # let data = [0u8, 0, 0, 0, 255, 255, 255, 255]; // 0 at z = 0, 255 at z = 1
+/// # let vol = Volume::new(&data, [2; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+/// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+/// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+/// let pre = PreintegratedTable::build(&tf, 0.25, 32).unwrap();
+/// let m = PreintegratedMedium::new(vol, pre.view()); // the unit cube, scalar rising along z
+/// let (rays, mut out) = ([Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z)], [Rgba::ZERO]);
+/// integrate_preintegrated_scalar(&m, &rays, &mut out, &MarchParams::reference(0.25)).unwrap();
+/// // tau rises from 0 to 2 along the ray: optical depth 1, exact even in four steps.
+/// assert!((out[0].a - (1.0 - (-1.0f32).exp())).abs() < 1e-5);
+/// let err = integrate_preintegrated_scalar(&m, &rays, &mut out, &MarchParams::reference(0.1)).unwrap_err();
+/// assert!(matches!(err, VolumeError::StepMismatch { .. })); // the table is for one step only
+/// ```
 pub fn integrate_preintegrated_scalar<V: Voxel>(
     m: &PreintegratedMedium<'_, V>,
     rays: &[Ray],
@@ -1085,6 +1241,24 @@ fn skip_lanes<V: Voxel>(
 }
 
 /// Pre-integrated marching with the fastest kernel, [`integrate_preintegrated_x8`].
+///
+/// ```
+/// # use strahl::{Ray, Vec3, volume::*};
+/// # let data: Vec<u8> = (0..8 * 8 * 8).map(|i| (i * 37 % 251) as u8).collect();
+/// # let vol = Volume::new(&data, [8; 3], Vec3::splat(0.25), Vec3::ZERO).unwrap();
+/// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.2], 6.0), TfEntry::new([0.2, 0.5, 1.0], 1.0)];
+/// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+/// # let rays: Vec<Ray> = (0..11)
+/// #     .map(|i| Ray::new(Vec3::new(0.1 + 0.15 * i as f32, 0.9, -1.0), Vec3::new(0.0, -0.2, 1.0)))
+/// #     .collect();
+/// let pre = PreintegratedTable::build(&tf, 0.05, 32).unwrap();
+/// let m = PreintegratedMedium::new(vol, pre.view()); // rays: 11 rays across an 8^3 volume
+/// let (mut a, mut b) = (vec![Rgba::ZERO; 11], vec![Rgba::ZERO; 11]);
+/// let p = MarchParams::fast(0.05);
+/// let sa = integrate_preintegrated(&m, &rays, &mut a, &p).unwrap();
+/// assert_eq!(sa, integrate_preintegrated_scalar(&m, &rays, &mut b, &p).unwrap());
+/// assert!(a.iter().zip(&b).all(|(x, y)| x.bit_eq(y))); // the scalar reference's bits
+/// ```
 #[inline]
 pub fn integrate_preintegrated<V: Voxel>(
     m: &PreintegratedMedium<'_, V>,

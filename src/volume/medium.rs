@@ -8,6 +8,16 @@ use crate::math::f32x8;
 use glam::Vec3;
 
 /// Extinction and colour at one point.
+///
+/// ```
+/// use strahl::{Vec3, volume::*};
+/// let data = [1.0f32; 8];
+/// let vol = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+/// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.0], 4.0)];
+/// let m = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 2.0).unwrap());
+/// // Value 1 lies halfway up the table: half its extinction, half its colour.
+/// assert_eq!(m.lookup(Vec3::splat(0.5)), Lookup::Sample(Sample { tau: 2.0, color: [0.5, 0.25, 0.0] }));
+/// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Sample {
     /// Extinction `tau` per world unit (`>= 0`; a NaN counts as 0).
@@ -17,6 +27,21 @@ pub struct Sample {
 }
 
 /// Extinction and colour at eight points.
+///
+/// ```
+/// use strahl::{Vec3, math::f32x8, volume::*};
+/// let data: Vec<f32> = (0..8).map(|i| i as f32).collect();
+/// let vol = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+/// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.0], 8.0)];
+/// let m = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 8.0).unwrap());
+/// let xs = [0.0, 0.1, 0.3, 0.5, 0.7, 0.9, 1.0, 0.25];
+/// let g = [f32x8::new(xs), f32x8::splat(0.5), f32x8::splat(0.25)];
+/// let smp: SampleX8 = m.lookup_x8(&g, 0xff, &mut [EmptyRegion::default(); 8]).unwrap();
+/// for (l, &x) in xs.iter().enumerate() {
+///     let Lookup::Sample(s) = m.lookup(Vec3::new(x, 0.5, 0.25)) else { unreachable!() };
+///     assert_eq!((smp.tau.to_array()[l].to_bits(), smp.color[1].to_array()[l]), (s.tau.to_bits(), s.color[1]));
+/// }
+/// ```
 #[derive(Clone, Copy, Debug)]
 pub struct SampleX8 {
     /// Extinction per lane.
@@ -30,6 +55,22 @@ pub struct SampleX8 {
 /// Contract: the sample that reported it adds nothing, every sample whose local position lies in
 /// the closed box [`safe`](Self::safe) adds nothing (zero extinction), and [`exit`](Self::exit)
 /// (the region the marcher jumps across) lies inside `safe`.
+///
+/// ```
+/// # use strahl::{Vec3, math::f32x8, volume::*};
+/// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+/// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+/// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+/// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+/// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+/// # grid.classify(&tf);
+/// # let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+/// // `m`: 16^3 voxels, opaque only where x >= 12, skipping over a grid of 4^3-cell blocks.
+///
+/// let Lookup::Empty(r) = m.lookup(Vec3::new(2.0, 8.0, 8.0)) else { panic!("x = 2 is transparent") };
+/// assert!(r.exit.contains_point(Vec3::new(2.0, 8.0, 8.0)) && r.safe.contains(&r.exit));
+/// assert!(r.safe.max.x < 12.0); // every sample in `safe` has zero extinction; x = 12 does not
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EmptyRegion {
     /// The box to jump across, in local coordinates.
@@ -48,6 +89,24 @@ impl Default for EmptyRegion {
 }
 
 /// The answer of [`Medium::lookup`].
+///
+/// ```
+/// # use strahl::{Vec3, math::f32x8, volume::*};
+/// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+/// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+/// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+/// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+/// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+/// # grid.classify(&tf);
+/// # let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+/// // `m`: 16^3 voxels, opaque only where x >= 12, skipping over a grid of 4^3-cell blocks.
+///
+/// assert!(matches!(m.lookup(Vec3::new(13.0, 8.0, 8.0)), Lookup::Sample(s) if s.tau > 0.0));
+/// assert!(matches!(m.lookup(Vec3::new(1.0, 8.0, 8.0)), Lookup::Empty(_)));
+/// // Without the grid the same point is a sample of zero extinction.
+/// let plain = VolumeMedium::new(vol, tf);
+/// assert!(matches!(plain.lookup(Vec3::new(1.0, 8.0, 8.0)), Lookup::Sample(s) if s.tau == 0.0));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Lookup {
     /// The sample.
@@ -82,21 +141,71 @@ pub enum Lookup {
 /// ```
 pub trait Medium {
     /// The world box outside which the medium is empty.
+    ///
+    /// ```
+    /// use strahl::{Vec3, volume::{Medium, TfEntry, TransferFunction, Volume, VolumeMedium}};
+    /// let data = [0u8; 4 * 3 * 2];
+    /// let vol = Volume::new(&data, [4, 3, 2], Vec3::splat(0.5), Vec3::X).unwrap();
+    /// let m = VolumeMedium::new(vol, TransferFunction::new(&[TfEntry::TRANSPARENT], 0.0, 1.0).unwrap());
+    /// let b = m.bounds(); // the voxel centres: origin + (dims - 1) spacing
+    /// assert_eq!((b.min, b.max), (Vec3::X, Vec3::new(2.5, 1.0, 0.5)));
+    /// ```
     fn bounds(&self) -> Aabb;
 
     /// `(origin, scale)` of the local coordinates: `local = (world - origin) * scale`, `scale > 0`.
     /// The default is the identity.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3, volume::*};
+    /// struct Fog;
+    /// impl Medium for Fog {
+    ///     fn bounds(&self) -> Aabb { Aabb::new(Vec3::ZERO, Vec3::ONE) }
+    ///     fn lookup(&self, _g: Vec3) -> Lookup { Lookup::Sample(Sample { tau: 1.0, color: [1.0; 3] }) }
+    /// }
+    /// assert_eq!(Fog.local_frame(), (Vec3::ZERO, Vec3::ONE)); // the default: local = world
+    /// # let data = [0u8; 8];
+    /// let vol = Volume::new(&data, [2; 3], Vec3::splat(0.25), Vec3::X).unwrap();
+    /// let m = VolumeMedium::new(vol, TransferFunction::new(&[TfEntry::TRANSPARENT], 0.0, 1.0).unwrap());
+    /// assert_eq!(m.local_frame(), (Vec3::X, Vec3::splat(4.0))); // a volume's: voxel coordinates
+    /// ```
     fn local_frame(&self) -> (Vec3, Vec3) {
         (Vec3::ZERO, Vec3::ONE)
     }
 
     /// Extinction and colour at local position `g`, or the empty region around it.
+    ///
+    /// ```
+    /// use strahl::{Vec3, volume::*};
+    /// let data: Vec<f32> = (0..8).map(|i| i as f32).collect(); // voxel (i, j, k) holds i + 2j + 4k
+    /// let vol = Volume::new(&data, [2, 2, 2], Vec3::splat(0.5), Vec3::ZERO).unwrap();
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 8.0)];
+    /// let m = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 8.0).unwrap()); // tau = value
+    /// // Local (voxel) coordinates, not world ones: (1, 0.5, 0) reads 1 + 2 0.5 + 4 0.
+    /// assert!(matches!(m.lookup(Vec3::new(1.0, 0.5, 0.0)), Lookup::Sample(s) if s.tau == 2.0));
+    /// ```
     fn lookup(&self, g: Vec3) -> Lookup;
 
     /// The empty region around local position `g`, if [`lookup`](Self::lookup) would report one
     /// there (and `None` exactly where it would return a sample). The marcher asks this while it
     /// jumps across regions, where the sample itself is not needed; the default calls `lookup`,
     /// a medium that can answer without sampling (as [`VolumeMedium`] does) overrides it.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, math::f32x8, volume::*};
+    /// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+    /// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// # grid.classify(&tf);
+    /// # let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+    /// // `m`: 16^3 voxels, opaque only where x >= 12, skipping over a grid of 4^3-cell blocks.
+    ///
+    /// assert_eq!(m.empty_region(Vec3::new(13.0, 8.0, 8.0)), None); // opaque
+    /// let r = m.empty_region(Vec3::new(2.0, 8.0, 8.0)).unwrap();
+    /// assert_eq!(m.lookup(Vec3::new(2.0, 8.0, 8.0)), Lookup::Empty(r)); // what lookup reports there
+    /// assert_eq!(VolumeMedium::new(vol, tf).empty_region(Vec3::new(2.0, 8.0, 8.0)), None); // no grid
+    /// ```
     #[inline]
     fn empty_region(&self, g: Vec3) -> Option<EmptyRegion> {
         match self.lookup(g) {
@@ -109,6 +218,24 @@ pub trait Medium {
     /// steps before it does. Changes no result; the default does nothing. [`integrate_x8`](super::integrate_x8)
     /// calls it about every second step for the positions six steps ahead; a medium over memory the
     /// caches do not hold (a large volume) implements it, as [`VolumeMedium`] does.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, math::f32x8, volume::*};
+    /// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+    /// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// # grid.classify(&tf);
+    /// # let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+    /// // `m`: 16^3 voxels, opaque only where x >= 12, skipping over a grid of 4^3-cell blocks.
+    ///
+    /// let g = [f32x8::new([0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0]), f32x8::splat(8.0), f32x8::splat(8.0)];
+    /// let tau = || m.lookup_x8(&g, 0b1111_0000, &mut [EmptyRegion::default(); 8]).unwrap().tau.to_array();
+    /// let before = tau();
+    /// m.prefetch_x8(&g); // a hint to the cache only
+    /// assert_eq!(tau().map(f32::to_bits), before.map(f32::to_bits));
+    /// ```
     #[inline(always)]
     fn prefetch_x8(&self, g: &[f32x8; 3]) {
         let _ = g;
@@ -117,6 +244,26 @@ pub trait Medium {
     /// Eight lookups. Lanes not set in `active` are not looked at. Returns the samples, or, if any
     /// active lane lies in an empty region, the mask of those lanes (their regions written to
     /// `empty`). Must agree with [`lookup`](Self::lookup) lane by lane, bit for bit.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, math::f32x8, volume::*};
+    /// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+    /// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// # grid.classify(&tf);
+    /// # let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+    /// // `m`: 16^3 voxels, opaque only where x >= 12, skipping over a grid of 4^3-cell blocks.
+    ///
+    /// let g = [f32x8::new([0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0]), f32x8::splat(8.0), f32x8::splat(8.0)];
+    /// let mut regions = [EmptyRegion::default(); 8];
+    /// assert_eq!(m.lookup_x8(&g, 0xff, &mut regions).unwrap_err(), 0b0000_1111); // lanes at x < 8 jump
+    /// assert_eq!(Lookup::Empty(regions[1]), m.lookup(Vec3::new(2.0, 8.0, 8.0)));
+    /// let smp = m.lookup_x8(&g, 0b1111_0000, &mut regions).unwrap(); // the others sample
+    /// let Lookup::Sample(s) = m.lookup(Vec3::new(14.0, 8.0, 8.0)) else { unreachable!() };
+    /// assert_eq!(smp.tau.to_array()[7].to_bits(), s.tau.to_bits());
+    /// ```
     #[inline]
     fn lookup_x8(&self, g: &[f32x8; 3], active: u32, empty: &mut [EmptyRegion; 8]) -> Result<SampleX8, u32> {
         match lookup_lanes(self, g, active, empty) {
@@ -245,6 +392,18 @@ pub struct VolumeMedium<'a, V: Voxel> {
 
 impl<'a, V: Voxel> VolumeMedium<'a, V> {
     /// The medium without empty-space skipping.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, volume::*};
+    /// let data = [1.0f32; 8];
+    /// let vol = Volume::new(&data, [2, 2, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let table = [TfEntry::new([1.0; 3], 0.5)];
+    /// let m = VolumeMedium::new(vol, TransferFunction::new(&table, 0.0, 1.0).unwrap());
+    /// assert!(!m.skips());
+    /// let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
+    /// let p = integrate_ray(&m, &ray, &MarchParams::reference(0.25)).unwrap();
+    /// assert!((p.a - (1.0 - (-0.5f32).exp())).abs() < 1e-6); // tau 0.5 over length 1
+    /// ```
     pub fn new(vol: Volume<'a, V>, tf: TransferFunction<'a>) -> Self {
         Self { vol, tf, grid: None }
     }
@@ -254,6 +413,24 @@ impl<'a, V: Voxel> VolumeMedium<'a, V> {
     /// Errors: [`VolumeError::GridMismatch`] if the grid was built for other dimensions,
     /// [`VolumeError::StaleGrid`] if it was not classified with this transfer function (compared by
     /// [`TransferFunction::fingerprint`]).
+    ///
+    /// ```
+    /// # use strahl::{Vec3, math::f32x8, volume::*};
+    /// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+    /// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// # grid.classify(&tf);
+    /// let small = [0u8; 8];
+    /// let other = Volume::new(&small, [2; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// assert_eq!(VolumeMedium::new(other, tf).with_grid(&grid).unwrap_err(), VolumeError::GridMismatch);
+    /// let denser = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)]; // another table, other empty entries
+    /// grid.classify(&TransferFunction::new(&denser, 0.0, 255.0).unwrap());
+    /// assert_eq!(VolumeMedium::new(vol, tf).with_grid(&grid).unwrap_err(), VolumeError::StaleGrid);
+    /// grid.classify(&tf);
+    /// assert!(VolumeMedium::new(vol, tf).with_grid(&grid).unwrap().skips());
+    /// ```
     pub fn with_grid<S: AsRef<[Macrocell]>>(self, grid: &'a MacrocellGrid<S>) -> Result<Self, VolumeError> {
         if grid.volume_dims() != self.vol.dims() {
             return Err(VolumeError::GridMismatch);
@@ -268,16 +445,61 @@ impl<'a, V: Voxel> VolumeMedium<'a, V> {
     }
 
     /// The volume.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, math::f32x8, volume::*};
+    /// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+    /// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// # grid.classify(&tf);
+    /// # let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+    /// // `m`: 16^3 voxels, opaque only where x >= 12, skipping over a grid of 4^3-cell blocks.
+    ///
+    /// assert_eq!(m.volume().dims(), [16; 3]);
+    /// assert!(core::ptr::eq(m.volume().data(), &data[..])); // borrowed, not copied
+    /// ```
     pub fn volume(&self) -> &Volume<'a, V> {
         &self.vol
     }
 
     /// The transfer function.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, math::f32x8, volume::*};
+    /// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+    /// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// # grid.classify(&tf);
+    /// # let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+    /// // `m`: 16^3 voxels, opaque only where x >= 12, skipping over a grid of 4^3-cell blocks.
+    ///
+    /// assert_eq!(m.transfer_function().fingerprint(), grid.classified_for().unwrap());
+    /// assert_eq!(m.transfer_function().lookup_scalar(255.0), (2.0, [1.0; 3]));
+    /// ```
     pub fn transfer_function(&self) -> &TransferFunction<'a> {
         &self.tf
     }
 
     /// `true` if empty-space skipping is on.
+    ///
+    /// ```
+    /// # use strahl::{Vec3, math::f32x8, volume::*};
+    /// # let data: Vec<u8> = (0..16 * 16 * 16).map(|i| if i % 16 >= 12 { 200 } else { 0 }).collect();
+    /// # let vol = Volume::new(&data, [16; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let mut grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// # grid.classify(&tf);
+    /// # let m = VolumeMedium::new(vol, tf).with_grid(&grid).unwrap();
+    /// // `m`: 16^3 voxels, opaque only where x >= 12, skipping over a grid of 4^3-cell blocks.
+    ///
+    /// assert!(m.skips());
+    /// assert!(!VolumeMedium::new(vol, tf).skips());
+    /// ```
     pub fn skips(&self) -> bool {
         self.grid.is_some()
     }

@@ -162,6 +162,13 @@ const _: () = assert!(core::mem::size_of::<Rgba>() == 16);
 
 impl Rgba {
     /// Nothing gathered: fully transparent.
+    ///
+    /// ```
+    /// use strahl::volume::Rgba;
+    /// assert_eq!(Rgba::ZERO, Rgba::default());
+    /// assert_eq!(Rgba::ZERO.over([0.3, 0.6, 0.9]), [0.3, 0.6, 0.9]); // the background shows through
+    /// assert!(Rgba::ZERO.bit_eq(&bytemuck::Zeroable::zeroed()));
+    /// ```
     pub const ZERO: Self = Self {
         r: 0.0,
         g: 0.0,
@@ -170,6 +177,13 @@ impl Rgba {
     };
 
     /// `self` over an opaque background colour: `C + (1 - A) bg`.
+    ///
+    /// ```
+    /// use strahl::volume::Rgba;
+    /// let half_red = Rgba { r: 0.5, g: 0.0, b: 0.0, a: 0.5 };
+    /// assert_eq!(half_red.over([0.0, 1.0, 0.0]), [0.5, 0.5, 0.0]);
+    /// assert_eq!(Rgba::ZERO.over([0.2, 0.4, 0.6]), [0.2, 0.4, 0.6]); // nothing in front
+    /// ```
     #[inline]
     pub fn over(&self, bg: [f32; 3]) -> [f32; 3] {
         let t = 1.0 - self.a;
@@ -178,6 +192,13 @@ impl Rgba {
 
     /// `true` if all four components have the same bits as `other`'s (stricter than `==`, which
     /// equates `0.0` and `-0.0`).
+    ///
+    /// ```
+    /// use strahl::volume::Rgba;
+    /// let neg = Rgba { r: -0.0, ..Rgba::ZERO };
+    /// assert!(neg == Rgba::ZERO && !neg.bit_eq(&Rgba::ZERO));
+    /// assert!(Rgba { a: 0.5, ..Rgba::ZERO }.bit_eq(&Rgba { a: 0.5, ..Rgba::ZERO }));
+    /// ```
     #[inline]
     pub fn bit_eq(&self, other: &Rgba) -> bool {
         bytemuck::bytes_of(self) == bytemuck::bytes_of(other)

@@ -74,10 +74,31 @@ use glam::Vec3;
 
 /// Largest table resolution (nodes per axis): `512`, so a table holds at most `2^18` entries
 /// (4 MB).
+///
+/// ```
+/// use strahl::volume::{PREINTEGRATED_MAX_RES, PreintegratedTable, TfEntry, TransferFunction, VolumeError};
+/// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+/// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+/// let mut none: [TfEntry; 0] = [];
+/// let mut err = |res| PreintegratedTable::build_in(&tf, 0.5, res, &mut none[..]).unwrap_err();
+/// let needed = (PREINTEGRATED_MAX_RES * PREINTEGRATED_MAX_RES) as usize;
+/// assert_eq!(err(PREINTEGRATED_MAX_RES), VolumeError::StorageTooSmall { needed, actual: 0 });
+/// assert_eq!(err(PREINTEGRATED_MAX_RES + 1), VolumeError::InvalidResolution);
+/// ```
 pub const PREINTEGRATED_MAX_RES: u32 = 512;
 
 /// Largest `res^2 (entries - 1)` a table may be built for (`2^30`): the intervals its segments
 /// walk, which bounds the build time (see the module docs).
+///
+/// ```
+/// use strahl::volume::{PREINTEGRATED_MAX_WORK, PreintegratedTable, TfEntry, TransferFunction, VolumeError};
+/// assert_eq!(PREINTEGRATED_MAX_WORK, 512 * 512 * 4096);
+/// let long = vec![TfEntry::TRANSPARENT; 4098]; // 4097 intervals
+/// let tf = TransferFunction::new(&long, 0.0, 1.0).unwrap();
+/// let big = PreintegratedTable::build(&tf, 0.1, 512).map(|_| ());
+/// assert_eq!(big, Err(VolumeError::InvalidResolution)); // refused before any work
+/// assert!(PreintegratedTable::build(&tf, 0.1, 16).is_ok());
+/// ```
 pub const PREINTEGRATED_MAX_WORK: u64 = 1 << 30;
 
 /// Optical depth per quadrature piece (see the module docs).
@@ -145,6 +166,18 @@ impl<S: AsRef<[TfEntry]> + AsMut<[TfEntry]>> PreintegratedTable<S> {
     /// Errors: [`VolumeError::InvalidStep`] unless `step` is finite and positive,
     /// [`VolumeError::InvalidResolution`] unless `res` lies in `2..=`[`PREINTEGRATED_MAX_RES`] and
     /// `res^2 (entries - 1)` is at most [`PREINTEGRATED_MAX_WORK`], [`VolumeError::StorageTooSmall`].
+    ///
+    /// ```
+    /// use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// // tau rises linearly from 0 to 2 over the range [0, 1].
+    /// let table = [TfEntry::new([1.0; 3], 0.0), TfEntry::new([1.0; 3], 2.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    /// let mut storage = [TfEntry::TRANSPARENT; 9]; // 3 x 3 nodes, no allocation
+    /// let pre = PreintegratedTable::build_in(&tf, 0.5, 3, &mut storage[..]).unwrap();
+    /// let e = pre.entries();
+    /// assert!((e[2].tau - 1.0).abs() < 1e-6); // from 0 to 1: the mean of the ramp
+    /// assert!((e[4].tau - 1.0).abs() < 1e-6); // from 0.5 to 0.5: tau(0.5)
+    /// ```
     pub fn build_in(tf: &TransferFunction<'_>, step: f32, res: u32, mut storage: S) -> Result<Self, VolumeError> {
         if !(step.is_finite() && step > 0.0) {
             return Err(VolumeError::InvalidStep);
@@ -197,6 +230,14 @@ impl<S: AsRef<[TfEntry]> + AsMut<[TfEntry]>> PreintegratedTable<S> {
 #[cfg(feature = "alloc")]
 impl PreintegratedTable<alloc::vec::Vec<TfEntry>> {
     /// Builds the table in a new `Vec` (feature `alloc`); see [`build_in`](Self::build_in).
+    ///
+    /// ```
+    /// use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction, VolumeError};
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    /// assert_eq!(PreintegratedTable::build(&tf, 0.25, 32).unwrap().entries().len(), 32 * 32);
+    /// assert_eq!(PreintegratedTable::build(&tf, 0.0, 32).unwrap_err(), VolumeError::InvalidStep);
+    /// ```
     pub fn build(tf: &TransferFunction<'_>, step: f32, res: u32) -> Result<Self, VolumeError> {
         let n = len_for(res)?;
         Self::build_in(tf, step, res, alloc::vec![TfEntry::TRANSPARENT; n])
@@ -205,30 +246,75 @@ impl PreintegratedTable<alloc::vec::Vec<TfEntry>> {
 
 impl<S: AsRef<[TfEntry]>> PreintegratedTable<S> {
     /// Nodes per axis.
+    ///
+    /// ```
+    /// # use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, -1.0, 3.0).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.25, 8).unwrap();
+    /// assert_eq!(pre.res(), 8);
+    /// ```
     #[inline]
     pub fn res(&self) -> u32 {
         self.res
     }
 
     /// The step length the table was integrated for.
+    ///
+    /// ```
+    /// # use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, -1.0, 3.0).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.25, 8).unwrap();
+    /// assert_eq!(pre.step(), 0.25);
+    /// ```
     #[inline]
     pub fn step(&self) -> f32 {
         self.step
     }
 
     /// The scalar range `(lo, hi)` of the nodes (the transfer function's).
+    ///
+    /// ```
+    /// # use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, -1.0, 3.0).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.25, 8).unwrap();
+    /// assert_eq!(pre.range(), (-1.0, 3.0));
+    /// ```
     #[inline]
     pub fn range(&self) -> (f32, f32) {
         (self.lo, self.hi)
     }
 
     /// The entries, row `i` (front value `v_i`) after row `i - 1`: entry `(i, j)` at `i res + j`.
+    ///
+    /// ```
+    /// use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 3.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.5, 5).unwrap();
+    /// let e = pre.entries(); // nodes 0, 0.25, 0.5, 0.75, 1
+    /// assert_eq!(e.len(), 25);
+    /// assert_eq!(e[5 + 2].tau, 0.0); // (1, 2): from 0.25 to 0.5, clear
+    /// assert!(e[2 * 5 + 3].tau > 0.0); // (2, 3): from 0.5 to 0.75, into the ramp
+    /// ```
     #[inline]
     pub fn entries(&self) -> &[TfEntry] {
         &self.entries.as_ref()[..self.res as usize * self.res as usize]
     }
 
     /// The table borrowed, for a [`PreintegratedMedium`].
+    ///
+    /// ```
+    /// # use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// # let tf = TransferFunction::new(&table, -1.0, 3.0).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.25, 8).unwrap();
+    /// let view = pre.view();
+    /// assert_eq!(view.entries(), pre.entries());
+    /// assert_eq!(view.lookup_scalar(0.3, 2.1), pre.lookup_scalar(0.3, 2.1));
+    /// ```
     #[inline]
     pub fn view(&self) -> PreintegratedTable<&[TfEntry]> {
         PreintegratedTable {
@@ -247,6 +333,16 @@ impl<S: AsRef<[TfEntry]>> PreintegratedTable<S> {
     /// function's [fingerprint](TransferFunction::fingerprint) and the resolution, hashed on with
     /// a tag), so it differs from any transfer function's own (but for a 64-bit hash collision):
     /// what [`MacrocellGrid::classify_preintegrated`] remembers.
+    ///
+    /// ```
+    /// use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    /// let pre = |step, res| PreintegratedTable::build(&tf, step, res).unwrap().fingerprint();
+    /// assert_ne!(pre(0.5, 16), tf.fingerprint()); // never the transfer function's own
+    /// assert_ne!(pre(0.5, 16), pre(0.5, 32)); // other nodes
+    /// assert_eq!(pre(0.5, 16), pre(0.1, 16)); // the step does not change which entries are clear
+    /// ```
     ///
     /// [`MacrocellGrid::classify_preintegrated`]: super::MacrocellGrid::classify_preintegrated
     #[inline]
@@ -296,6 +392,18 @@ impl<S: AsRef<[TfEntry]>> PreintegratedTable<S> {
     /// Mean extinction and weighted mean colour of a segment of length [`step`](Self::step) whose
     /// scalar runs from `front` to `back`: the four nearest entries, interpolated bilinearly
     /// (first along the back value, then the front).
+    ///
+    /// ```
+    /// use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// // Red, tau rising linearly from 0 to 4 over [0, 1].
+    /// let table = [TfEntry::new([1.0, 0.0, 0.0], 0.0), TfEntry::new([1.0, 0.0, 0.0], 4.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.1, 5).unwrap();
+    /// let (tau, c) = pre.lookup_scalar(0.0, 1.0);
+    /// assert!((tau - 2.0).abs() < 1e-6); // the mean of 4 s over [0, 1]
+    /// assert!((c[0] - 1.0).abs() < 1e-6 && c[1] == 0.0);
+    /// assert_eq!(pre.lookup_scalar(-5.0, 9.0), (tau, c)); // clamped to the range
+    /// ```
     #[inline(always)]
     pub fn lookup_scalar(&self, front: f32, back: f32) -> (f32, [f32; 3]) {
         let (u, v) = (self.coord(front), self.coord(back));
@@ -316,6 +424,22 @@ impl<S: AsRef<[TfEntry]>> PreintegratedTable<S> {
     }
 
     /// Eight lookups; lane `l` equals [`lookup_scalar`](Self::lookup_scalar) of lane `l` bit for bit.
+    ///
+    /// ```
+    /// # use strahl::volume::{PreintegratedTable, TfEntry, TransferFunction};
+    /// # let table = [TfEntry::new([1.0, 0.5, 0.0], 0.0), TfEntry::new([0.0, 0.5, 1.0], 4.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    /// use strahl::math::f32x8;
+    /// let pre = PreintegratedTable::build(&tf, 0.1, 17).unwrap();
+    /// let front = [0.0, 0.1, 0.3, 0.5, 0.77, 1.0, -2.0, f32::NAN];
+    /// let back = [1.0, 0.9, 0.3, 0.2, 0.0, 1.5, 0.4, 0.6];
+    /// let (tau, c) = pre.lookup_x8(f32x8::new(front), f32x8::new(back));
+    /// for l in 0..8 {
+    ///     let (t, cs) = pre.lookup_scalar(front[l], back[l]);
+    ///     assert_eq!(tau.to_array()[l].to_bits(), t.to_bits());
+    ///     assert_eq!(c[2].to_array()[l].to_bits(), cs[2].to_bits());
+    /// }
+    /// ```
     #[inline(always)]
     pub fn lookup_x8(&self, front: f32x8, back: f32x8) -> (f32x8, [f32x8; 3]) {
         let coord = |s: f32x8| {
@@ -616,6 +740,19 @@ pub struct PreintegratedMedium<'a, V: Voxel> {
 
 impl<'a, V: Voxel> PreintegratedMedium<'a, V> {
     /// The volume seen through `table`, without empty-space skipping.
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::*;
+    /// # let data = [0u8, 0, 0, 0, 255, 255, 255, 255];
+    /// # let vol = Volume::new(&data, [2; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let pre = PreintegratedTable::build(&tf, 0.5, 16).unwrap();
+    /// let m = PreintegratedMedium::new(vol, pre.view());
+    /// assert!(!m.skips());
+    /// assert_eq!(m.table().entries(), pre.entries());
+    /// ```
     pub fn new(vol: Volume<'a, V>, table: PreintegratedTable<&'a [TfEntry]>) -> Self {
         Self { vol, table, grid: None }
     }
@@ -657,6 +794,20 @@ impl<'a, V: Voxel> PreintegratedMedium<'a, V> {
     }
 
     /// `true` if empty-space skipping is on.
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::*;
+    /// # let data = [0u8, 0, 0, 0, 255, 255, 255, 255];
+    /// # let vol = Volume::new(&data, [2; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let pre = PreintegratedTable::build(&tf, 0.5, 16).unwrap();
+    /// let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// grid.classify_preintegrated(&pre);
+    /// assert!(!PreintegratedMedium::new(vol, pre.view()).skips());
+    /// assert!(PreintegratedMedium::new(vol, pre.view()).with_grid(&grid).unwrap().skips());
+    /// ```
     #[inline]
     pub fn skips(&self) -> bool {
         self.grid.is_some()
@@ -697,12 +848,36 @@ impl<'a, V: Voxel> PreintegratedMedium<'a, V> {
     }
 
     /// The volume.
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::*;
+    /// # let data = [0u8, 0, 0, 0, 255, 255, 255, 255];
+    /// # let vol = Volume::new(&data, [2; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let pre = PreintegratedTable::build(&tf, 0.5, 16).unwrap();
+    /// let m = PreintegratedMedium::new(vol, pre.view());
+    /// assert_eq!(m.volume().dims(), [2, 2, 2]);
+    /// ```
     #[inline]
     pub fn volume(&self) -> &Volume<'a, V> {
         &self.vol
     }
 
     /// The table.
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::*;
+    /// # let data = [0u8, 0, 0, 0, 255, 255, 255, 255];
+    /// # let vol = Volume::new(&data, [2; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// # let pre = PreintegratedTable::build(&tf, 0.5, 16).unwrap();
+    /// let m = PreintegratedMedium::new(vol, pre.view());
+    /// assert_eq!((m.table().res(), m.table().step()), (16, 0.5));
+    /// ```
     #[inline]
     pub fn table(&self) -> &PreintegratedTable<&'a [TfEntry]> {
         &self.table

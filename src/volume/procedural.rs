@@ -51,11 +51,27 @@ pub fn unit_volume<V: Voxel>(data: &[V], n: u32) -> Result<Volume<'_, V>, super:
 ///
 /// `rho(x, y, z) = (1 - sin(pi z / 2) + alpha (1 + cos(2 pi f_M cos(pi r / 2)))) / (2 (1 + alpha))`,
 /// `r = sqrt(x^2 + y^2)`. Sampled on `41^3` it sits near the Nyquist limit.
+///
+/// ```
+/// use strahl::{Vec3, volume::procedural::{marschner_lobb, marschner_lobb_at}};
+/// let data = marschner_lobb(41);
+/// assert_eq!(data.len(), 41 * 41 * 41);
+/// assert!(data.iter().all(|v| (0.0..=1.0).contains(v)));
+/// assert_eq!(data[0], marschner_lobb_at(Vec3::splat(-1.0))); // voxel (0, 0, 0) at the corner
+/// ```
 pub fn marschner_lobb(n: u32) -> Vec<f32> {
     fill(n, marschner_lobb_at)
 }
 
 /// The Marschner-Lobb signal at one point (see [`marschner_lobb`]).
+///
+/// ```
+/// use strahl::{Vec3, volume::procedural::marschner_lobb_at};
+/// // At the origin: r = 0, so rho_r = cos(12 pi) = 1: (1 + 2 alpha) / (2 (1 + alpha)) = 0.6.
+/// assert!((marschner_lobb_at(Vec3::ZERO) - 0.6).abs() < 1e-6);
+/// // At (1, 0, 1): rho_r = cos(0) = 1 again, sin(pi / 2) = 1: 2 alpha / (2 (1 + alpha)) = 0.2.
+/// assert!((marschner_lobb_at(Vec3::new(1.0, 0.0, 1.0)) - 0.2).abs() < 1e-6);
+/// ```
 pub fn marschner_lobb_at(p: Vec3) -> f32 {
     let (fm, alpha) = (6.0f32, 0.25f32);
     let r = sqrtf(p.x * p.x + p.y * p.y);
@@ -67,6 +83,15 @@ pub fn marschner_lobb_at(p: Vec3) -> f32 {
 /// Tomographic Imaging", 1988), ten ellipsoids, with Toft's higher-contrast densities, stored as
 /// `u16` "Hounsfield-like" units (`1000` per unit density, background `0`, skull `1000`, brain
 /// `200`, ventricles `0`, small lesions `300`).
+///
+/// ```
+/// use strahl::volume::procedural::ct_phantom;
+/// let ct = ct_phantom(33); // voxel i at -1 + i / 16 on each axis
+/// let at = |i: usize, j: usize, k: usize| ct[i + 33 * (j + 33 * k)];
+/// assert_eq!(at(0, 0, 0), 0); // the corner: background
+/// assert_eq!(at(16, 30, 16), 1000); // y = 0.875: skull
+/// assert_eq!(at(16, 16, 16), 200); // the centre: brain (1 - 0.8)
+/// ```
 pub fn ct_phantom(n: u32) -> Vec<u16> {
     // (centre, semi-axes, rotation about z in degrees, density)
     const E: [([f32; 3], [f32; 3], f32, f32); 10] = [
@@ -93,13 +118,23 @@ pub fn ct_phantom(n: u32) -> Vec<u16> {
                 d += rho;
             }
         }
-        (d * 1000.0).clamp(0.0, 65535.0) as u16
+        // Rounded: the sums of densities are not exact in f32 (1 - 0.8 is 0.19999999).
+        libm::roundf(d * 1000.0).clamp(0.0, 65535.0) as u16
     })
 }
 
 /// A torus around the z axis, radius `major`, tube radius `minor`: `255` on the tube's centre
 /// circle falling linearly to `0` at its surface, `0` elsewhere. With `major = 0.5`,
 /// `minor = 0.15` about 97% of the voxels are `0`: the sparse scene of the skipping benchmark.
+///
+/// ```
+/// use strahl::volume::procedural::torus;
+/// let t = torus(33, 0.5, 0.15); // voxel i at -1 + i / 16 on each axis
+/// assert_eq!(t[24 + 33 * (16 + 33 * 16)], 255); // (0.5, 0, 0): on the centre circle
+/// assert_eq!(t[16 + 33 * (16 + 33 * 16)], 0); // the origin: in the hole
+/// let zeros = t.iter().filter(|&&v| v == 0).count() as f32 / t.len() as f32;
+/// assert!(zeros > 0.95);
+/// ```
 pub fn torus(n: u32, major: f32, minor: f32) -> Vec<u8> {
     fill(n, |p| {
         let q = sqrtf(p.x * p.x + p.y * p.y) - major;

@@ -65,11 +65,25 @@ impl Default for GridParams {
 
 impl GridParams {
     /// `block = 4`: tight around thin structures; 8x the blocks of the default.
+    ///
+    /// ```
+    /// use strahl::volume::{GridParams, Macrocell, MacrocellGrid};
+    /// let blocks = |p| MacrocellGrid::<Vec<Macrocell>>::len_for([33; 3], p).unwrap();
+    /// assert_eq!(GridParams::fine().block, 4);
+    /// assert_eq!(blocks(GridParams::fine()), 8 * blocks(GridParams::default()));
+    /// ```
     pub const fn fine() -> Self {
         Self { block: 4 }
     }
 
     /// `block = 16`: few jumps, for volumes with large empty regions.
+    ///
+    /// ```
+    /// use strahl::volume::{GridParams, Macrocell, MacrocellGrid};
+    /// assert_eq!(GridParams::coarse().block, 16);
+    /// let dims = MacrocellGrid::<Vec<Macrocell>>::macro_dims_for([257; 3], GridParams::coarse());
+    /// assert_eq!(dims, Ok([16; 3])); // 256 cells per axis in blocks of 16
+    /// ```
     pub const fn coarse() -> Self {
         Self { block: 16 }
     }
@@ -85,6 +99,18 @@ impl GridParams {
 
 /// One macrocell: the value range of the voxels its samples can read, and whether the current
 /// transfer function makes it transparent.
+///
+/// ```
+/// use strahl::Vec3;
+/// use strahl::volume::{GridParams, MacrocellGrid, Volume};
+/// let data: Vec<u8> = (0..17).collect(); // one row of 17 voxels, 16 cells: two blocks of 8
+/// let vol = Volume::new(&data, [17, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+/// let grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+/// let c = grid.cells();
+/// assert_eq!((c[0].min, c[0].max), (0.0, 9.0)); // voxels 0..=8 and one beyond
+/// assert_eq!((c[1].min, c[1].max), (7.0, 16.0)); // one before 8..=16
+/// assert_eq!(c[0].empty, 0); // not classified yet
+/// ```
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Macrocell {
@@ -204,6 +230,15 @@ impl<'a> GridView<'a> {
 impl<S: AsRef<[Macrocell]>> MacrocellGrid<S> {
     /// Macrocells per axis for a volume of `dims` voxels: `ceil(cells / block)`, with
     /// `cells = max(dims - 1, 1)` (`0` for an empty volume).
+    ///
+    /// ```
+    /// use strahl::volume::{GridParams, Macrocell, MacrocellGrid, VolumeError};
+    /// type Grid = MacrocellGrid<Vec<Macrocell>>;
+    /// let p = GridParams::default();
+    /// assert_eq!(Grid::macro_dims_for([33, 17, 2], p), Ok([4, 2, 1])); // 32, 16 and 1 cells
+    /// assert_eq!(Grid::macro_dims_for([0, 5, 5], p), Ok([0; 3]));
+    /// assert_eq!(Grid::macro_dims_for([9; 3], GridParams { block: 3 }), Err(VolumeError::InvalidBlock));
+    /// ```
     pub fn macro_dims_for(dims: [u32; 3], params: GridParams) -> Result<[u32; 3], VolumeError> {
         let shift = params.shift()?;
         if dims.contains(&0) {
@@ -213,27 +248,71 @@ impl<S: AsRef<[Macrocell]>> MacrocellGrid<S> {
     }
 
     /// Number of macrocells [`build_in`](Self::build_in) needs room for.
+    ///
+    /// ```
+    /// use strahl::volume::{GridParams, Macrocell, MacrocellGrid};
+    /// let n = MacrocellGrid::<&mut [Macrocell]>::len_for([33, 17, 2], GridParams::default());
+    /// assert_eq!(n, Ok(4 * 2 * 1));
+    /// ```
     pub fn len_for(dims: [u32; 3], params: GridParams) -> Result<usize, VolumeError> {
         let m = Self::macro_dims_for(dims, params)?;
         Ok(m.iter().map(|&d| d as usize).product())
     }
 
     /// Macrocells per axis.
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::{GridParams, MacrocellGrid, Volume};
+    /// # let data = vec![0u8; 33 * 17 * 2];
+    /// let vol = Volume::new(&data, [33, 17, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// assert_eq!(grid.macro_dims(), [4, 2, 1]);
+    /// ```
     pub fn macro_dims(&self) -> [u32; 3] {
         self.mdims
     }
 
     /// Voxel dimensions of the volume the grid was built for.
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::{GridParams, MacrocellGrid, Volume};
+    /// # let data = vec![0u8; 33 * 17 * 2];
+    /// let vol = Volume::new(&data, [33, 17, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// assert_eq!(grid.volume_dims(), vol.dims());
+    /// ```
     pub fn volume_dims(&self) -> [u32; 3] {
         self.vdims
     }
 
     /// Cells per macrocell along each axis.
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::{GridParams, MacrocellGrid, Volume};
+    /// # let data = vec![0u8; 33 * 17 * 2];
+    /// # let vol = Volume::new(&data, [33, 17, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let grid = MacrocellGrid::build(&vol, GridParams::fine()).unwrap();
+    /// assert_eq!((grid.block(), grid.macro_dims()), (4, [8, 4, 1]));
+    /// ```
     pub fn block(&self) -> u32 {
         1 << self.shift
     }
 
     /// The macrocells, x fastest.
+    ///
+    /// ```
+    /// use strahl::Vec3;
+    /// use strahl::volume::{GridParams, MacrocellGrid, Volume};
+    /// let mut data = vec![0u8; 33 * 17 * 2];
+    /// data[32 + 33 * 16] = 9; // the last voxel along x and y, at z = 0
+    /// let vol = Volume::new(&data, [33, 17, 2], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// let maxima: Vec<f32> = grid.cells().iter().map(|c| c.max).collect();
+    /// assert_eq!(maxima, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 9.0]); // 4 x 2 x 1 blocks
+    /// ```
     pub fn cells(&self) -> &[Macrocell] {
         &self.cells.as_ref()[..self.len()]
     }
@@ -243,11 +322,39 @@ impl<S: AsRef<[Macrocell]>> MacrocellGrid<S> {
     }
 
     /// Fingerprint of the transfer function of the last [`classify`](Self::classify), if any.
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::*;
+    /// # let mut data = [0u8; 17];
+    /// # data[16] = 255; // the last voxel: in block 1's range only
+    /// # let vol = Volume::new(&data, [17, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// assert_eq!(grid.classified_for(), None);
+    /// grid.classify(&tf);
+    /// assert_eq!(grid.classified_for(), Some(tf.fingerprint()));
+    /// ```
     pub fn classified_for(&self) -> Option<u64> {
         self.classified
     }
 
     /// Fraction of macrocells classified empty (`0` for a grid without macrocells).
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::*;
+    /// # let mut data = [0u8; 17];
+    /// # data[16] = 255; // the last voxel: in block 1's range only
+    /// # let vol = Volume::new(&data, [17, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// assert_eq!(grid.empty_fraction(), 0.0); // unclassified: nothing is empty
+    /// grid.classify(&tf);
+    /// assert_eq!(grid.empty_fraction(), 0.5); // block 0 reads only zeros, block 1 reads 255
+    /// ```
     pub fn empty_fraction(&self) -> f32 {
         let c = self.cells();
         if c.is_empty() {
@@ -346,6 +453,19 @@ impl<S: AsRef<[Macrocell]> + AsMut<[Macrocell]>> MacrocellGrid<S> {
     /// empty too, so the marcher jumps across that whole cube at once (the "proximity clouds" of
     /// D. Cohen, Z. Sheffer, "Proximity clouds: an acceleration technique for 3D grid traversal",
     /// The Visual Computer 11, 1994). Two raster passes over the 26-neighbourhood compute it.
+    ///
+    /// ```
+    /// use strahl::Vec3;
+    /// use strahl::volume::{GridParams, MacrocellGrid, TfEntry, TransferFunction, Volume};
+    /// let mut data = [0u8; 33]; // one row, four blocks of 8 cells
+    /// data[32] = 255; // seen only by the last block
+    /// let vol = Volume::new(&data, [33, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// grid.classify(&TransferFunction::new(&table, 0.0, 255.0).unwrap());
+    /// let empty: Vec<u32> = grid.cells().iter().map(|c| c.empty).collect();
+    /// assert_eq!(empty, [3, 2, 1, 0]); // distance to the non-empty block
+    /// ```
     pub fn classify(&mut self, tf: &TransferFunction<'_>) {
         self.classify_by(tf.fingerprint(), |min, max| tf.is_transparent(min, max));
     }
@@ -356,6 +476,21 @@ impl<S: AsRef<[Macrocell]> + AsMut<[Macrocell]>> MacrocellGrid<S> {
     /// [`PreintegratedMedium::with_grid`](super::PreintegratedMedium::with_grid) checks (and which
     /// no transfer function's fingerprint equals, so a grid classified for one kind of marcher is
     /// refused by the other).
+    ///
+    /// ```
+    /// # use strahl::Vec3;
+    /// # use strahl::volume::*;
+    /// # let mut data = [0u8; 17];
+    /// # data[16] = 255; // the last voxel: in block 1's range only
+    /// # let vol = Volume::new(&data, [17, 1, 1], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// # let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// # let tf = TransferFunction::new(&table, 0.0, 255.0).unwrap();
+    /// let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+    /// let pre = PreintegratedTable::build(&tf, 0.5, 16).unwrap();
+    /// grid.classify_preintegrated(&pre);
+    /// assert_eq!(grid.classified_for(), Some(pre.fingerprint()));
+    /// assert_eq!(grid.cells().iter().map(|c| c.empty != 0).collect::<Vec<_>>(), [true, false]);
+    /// ```
     pub fn classify_preintegrated<T: AsRef<[TfEntry]>>(&mut self, table: &PreintegratedTable<T>) {
         self.classify_by(table.fingerprint(), |min, max| table.is_transparent(min, max));
     }
@@ -398,6 +533,16 @@ impl<S: AsRef<[Macrocell]> + AsMut<[Macrocell]>> MacrocellGrid<S> {
 }
 
 /// Largest distance [`MacrocellGrid::classify`] stores in [`Macrocell::empty`].
+///
+/// ```
+/// use strahl::Vec3;
+/// use strahl::volume::{GridParams, MAX_EMPTY_RADIUS, MacrocellGrid, TfEntry, TransferFunction, Volume};
+/// let data = [0u8; 33 * 33 * 33];
+/// let vol = Volume::new(&data, [33; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+/// let mut grid = MacrocellGrid::build(&vol, GridParams::default()).unwrap();
+/// grid.classify(&TransferFunction::new(&[TfEntry::TRANSPARENT], 0.0, 1.0).unwrap());
+/// assert!(grid.cells().iter().all(|c| c.empty == MAX_EMPTY_RADIUS)); // nothing to be near
+/// ```
 pub const MAX_EMPTY_RADIUS: u32 = 1 << 16;
 
 /// The 13 neighbours that precede a cell in raster order (x fastest), as `(dx, dy, dz)` to
@@ -421,6 +566,17 @@ const HALF_NEIGHBOURHOOD: [(i64, i64, i64); 13] = [
 #[cfg(feature = "alloc")]
 impl MacrocellGrid<alloc::vec::Vec<Macrocell>> {
     /// Builds the grid in a new `Vec` (feature `alloc`); see [`build_in`](Self::build_in).
+    ///
+    /// ```
+    /// use strahl::Vec3;
+    /// use strahl::volume::{GridParams, MacrocellGrid, Volume, VolumeError};
+    /// let data: Vec<f32> = (0..9 * 9 * 9).map(|i| i as f32).collect();
+    /// let vol = Volume::new(&data, [9; 3], Vec3::ONE, Vec3::ZERO).unwrap();
+    /// let grid = MacrocellGrid::build(&vol, GridParams { block: 4 }).unwrap();
+    /// assert_eq!(grid.cells().len(), 8); // 8 cells per axis in blocks of 4
+    /// assert_eq!((grid.cells()[0].min, grid.cells()[7].max), (0.0, 728.0));
+    /// assert_eq!(MacrocellGrid::build(&vol, GridParams { block: 5 }).unwrap_err(), VolumeError::InvalidBlock);
+    /// ```
     pub fn build<V: Voxel>(vol: &Volume<'_, V>, params: GridParams) -> Result<Self, VolumeError> {
         let n = Self::len_for(vol.dims(), params)?;
         Self::build_in(vol, params, alloc::vec![Macrocell::default(); n])

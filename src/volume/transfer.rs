@@ -5,12 +5,33 @@ use crate::math::{Lane, f32x8, i32x8, max_l, min_l};
 use bytemuck::{Pod, Zeroable};
 
 /// Largest extinction an entry may hold, per world unit: `2^100`. An opacity of exactly 1 converts
-/// to it, and with any step it gives `a = 1 - exp(-tau dt) = 1` in `f32`.
+/// to it, and with any step of `1e-28` or more it gives `a = 1 - exp(-tau dt) = 1` in `f32`
+/// (`tau dt` about 127 or more; a step of `1e-30` gives about 0.72).
+///
+/// ```
+/// use strahl::volume::{TAU_MAX, TfEntry, TransferFunction, VolumeError};
+/// assert_eq!(TAU_MAX, 2f32.powi(100));
+/// let opaque = TfEntry::from_rgba_premultiplied([0.5, 0.5, 0.5, 1.0], 0.1);
+/// assert_eq!(opaque.tau, TAU_MAX);
+/// assert_eq!(opaque.opacity(1e-6), 1.0);
+/// let too_dense = [TfEntry::new([1.0; 3], 2.0 * TAU_MAX)];
+/// let err = TransferFunction::new(&too_dense, 0.0, 1.0).unwrap_err();
+/// assert_eq!(err, VolumeError::InvalidEntry { index: 0 });
+/// ```
 pub const TAU_MAX: f32 = 1.267_650_6e30;
 
 /// Largest `|c|` a colour channel of an entry may hold: `2^100`. Bounded so that interpolating two
 /// entries, `a + (b - a) w`, never overflows (`+MAX` beside `-MAX` would give `inf - inf = NaN`),
 /// and an accumulated colour stays below it too (its weights `(1 - A) a` sum to at most 1).
+///
+/// ```
+/// use strahl::volume::{COLOR_MAX, TfEntry, TransferFunction, VolumeError};
+/// let table = [TfEntry::new([COLOR_MAX; 3], 1.0), TfEntry::new([-COLOR_MAX; 3], 1.0)];
+/// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+/// assert_eq!(tf.lookup_scalar(0.5).1, [0.0; 3]); // MAX + (-MAX - MAX) / 2: finite throughout
+/// let bad = [TfEntry::TRANSPARENT, TfEntry::new([0.0, 2.0 * COLOR_MAX, 0.0], 1.0)];
+/// assert_eq!(TransferFunction::new(&bad, 0.0, 1.0).unwrap_err(), VolumeError::InvalidEntry { index: 1 });
+/// ```
 pub const COLOR_MAX: f32 = 1.267_650_6e30;
 
 /// One transfer function entry in physical form: emitted colour `c` (not premultiplied) and
@@ -41,12 +62,26 @@ const _: () = assert!(core::mem::size_of::<TfEntry>() == 16);
 
 impl TfEntry {
     /// Black and without extinction.
+    ///
+    /// ```
+    /// use strahl::volume::TfEntry;
+    /// assert_eq!(TfEntry::TRANSPARENT, TfEntry::default());
+    /// assert_eq!(TfEntry::TRANSPARENT.opacity(1e6), 0.0);
+    /// assert_eq!(TfEntry::TRANSPARENT.rgba_premultiplied(1.0), [0.0; 4]);
+    /// ```
     pub const TRANSPARENT: Self = Self {
         color: [0.0; 3],
         tau: 0.0,
     };
 
     /// An entry from colour and extinction per world unit.
+    ///
+    /// ```
+    /// use strahl::volume::TfEntry;
+    /// let e = TfEntry::new([1.0, 0.5, 0.0], 2.0);
+    /// assert_eq!((e.color, e.tau), ([1.0, 0.5, 0.0], 2.0));
+    /// assert!((e.opacity(0.5) - (1.0 - (-1.0f32).exp())).abs() < 1e-6); // tau dt = 1
+    /// ```
     #[inline]
     pub const fn new(color: [f32; 3], tau: f32) -> Self {
         Self { color, tau }
@@ -56,6 +91,16 @@ impl TfEntry {
     /// to `[0, 1]`) of a slab `dt0` thick, and `R = alpha0 c`. Gives `tau = -ln(1 - alpha0) / dt0`
     /// ([`TAU_MAX`] for `alpha0 = 1`) and `c = R / alpha0` (`0` where `alpha0 = 0`). A NaN `alpha0`
     /// counts as 0; a `dt0` that is not finite and positive gives a transparent entry.
+    ///
+    /// ```
+    /// use strahl::volume::{TAU_MAX, TfEntry};
+    /// let e = TfEntry::from_rgba_premultiplied([0.2, 0.1, 0.0, 0.25], 1.0);
+    /// assert_eq!(e.color, [0.8, 0.4, 0.0]); // R / alpha0
+    /// assert!((e.tau - (4.0f32 / 3.0).ln()).abs() < 1e-6); // -ln(1 - 0.25)
+    /// assert_eq!(TfEntry::from_rgba_premultiplied([1.0, 1.0, 1.0, 2.0], 0.5).tau, TAU_MAX); // alpha0 clamped to 1
+    /// assert_eq!(TfEntry::from_rgba_premultiplied([0.1; 4], 0.0), TfEntry::TRANSPARENT); // dt0 = 0
+    /// assert_eq!(TfEntry::from_rgba_premultiplied([0.1, 0.1, 0.1, f32::NAN], 1.0), TfEntry::TRANSPARENT);
+    /// ```
     pub fn from_rgba_premultiplied(rgba: [f32; 4], dt0: f32) -> Self {
         // NaN -> 0 (max_l returns its second operand on NaN).
         let a = min_l(max_l(rgba[3], 0.0), 1.0);
@@ -75,6 +120,14 @@ impl TfEntry {
 
     /// From straight (not premultiplied) RGBA authored for the reference step `dt0`: as
     /// [`from_rgba_premultiplied`](Self::from_rgba_premultiplied) with `c = (r, g, b)`.
+    ///
+    /// ```
+    /// use strahl::volume::TfEntry;
+    /// let straight = TfEntry::from_rgba_straight([0.8, 0.4, 0.0, 0.25], 0.1);
+    /// let premul = TfEntry::from_rgba_premultiplied([0.2, 0.1, 0.0, 0.25], 0.1);
+    /// assert_eq!(straight, premul); // the same entry, authored two ways
+    /// assert_eq!(TfEntry::from_rgba_straight([1.0, 1.0, 1.0, 0.0], 0.1), TfEntry::TRANSPARENT);
+    /// ```
     pub fn from_rgba_straight(rgba: [f32; 4], dt0: f32) -> Self {
         let e = Self::from_rgba_premultiplied([0.0, 0.0, 0.0, rgba[3]], dt0);
         if e.tau == 0.0 {
@@ -88,6 +141,14 @@ impl TfEntry {
 
     /// Opacity of a slab `dt` thick: `1 - exp(-tau dt)`, which equals the corrected
     /// `1 - (1 - alpha0)^(dt / dt0)` of an entry authored at `dt0`.
+    ///
+    /// ```
+    /// use strahl::volume::TfEntry;
+    /// let e = TfEntry::new([1.0; 3], core::f32::consts::LN_2); // half the light passes one unit
+    /// assert!((e.opacity(1.0) - 0.5).abs() < 1e-6);
+    /// assert!((e.opacity(2.0) - 0.75).abs() < 1e-6); // two slabs: 1 - 0.5^2
+    /// assert_eq!(e.opacity(0.0), 0.0);
+    /// ```
     #[inline]
     pub fn opacity(&self, dt: f32) -> f32 {
         1.0 - libm::expf(-(self.tau * dt))
@@ -95,6 +156,14 @@ impl TfEntry {
 
     /// The premultiplied RGBA of a slab `dt` thick: `[a c, a]` with `a = opacity(dt)`. This is the
     /// classic opacity-corrected table entry, for callers that composite tables themselves.
+    ///
+    /// ```
+    /// use strahl::volume::TfEntry;
+    /// let e = TfEntry::new([1.0, 0.5, 0.0], core::f32::consts::LN_2);
+    /// let [r, g, b, a] = e.rgba_premultiplied(1.0);
+    /// assert!((a - 0.5).abs() < 1e-6);
+    /// assert_eq!([r, g, b], [a, 0.5 * a, 0.0]); // colour times opacity
+    /// ```
     #[inline]
     pub fn rgba_premultiplied(&self, dt: f32) -> [f32; 4] {
         let a = self.opacity(dt);
@@ -146,6 +215,14 @@ pub struct TransferFunction<'a> {
 
 impl<'a> TransferFunction<'a> {
     /// Most entries a table may have (`2^24`, so that entry indices are exact in `f32`).
+    ///
+    /// ```
+    /// use strahl::volume::{TransferFunction, VolumeError};
+    /// assert_eq!(TransferFunction::MAX_ENTRIES, 1 << 24);
+    /// let top = (TransferFunction::MAX_ENTRIES - 1) as f32; // the last index, exact in f32
+    /// assert_eq!(top as usize, TransferFunction::MAX_ENTRIES - 1);
+    /// assert_eq!(TransferFunction::new(&[], 0.0, 1.0).unwrap_err(), VolumeError::EmptyTable);
+    /// ```
     pub const MAX_ENTRIES: usize = 1 << 24;
 
     /// A transfer function over `entries` for scalar values in `[lo, hi]`.
@@ -154,6 +231,16 @@ impl<'a> TransferFunction<'a> {
     /// [`MAX_ENTRIES`](Self::MAX_ENTRIES)), [`VolumeError::InvalidRange`] unless `lo < hi` are
     /// finite, [`VolumeError::InvalidEntry`] for a colour channel that is NaN or beyond
     /// `±`[`COLOR_MAX`], or an extinction that is NaN, negative or above [`TAU_MAX`].
+    ///
+    /// ```
+    /// use strahl::volume::{TfEntry, TransferFunction, VolumeError};
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// assert!(TransferFunction::new(&table, -1.0, 1.0).is_ok());
+    /// assert_eq!(TransferFunction::new(&table, 1.0, 1.0).unwrap_err(), VolumeError::InvalidRange);
+    /// assert_eq!(TransferFunction::new(&table, 0.0, f32::INFINITY).unwrap_err(), VolumeError::InvalidRange);
+    /// let bad = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], -2.0)];
+    /// assert_eq!(TransferFunction::new(&bad, 0.0, 1.0).unwrap_err(), VolumeError::InvalidEntry { index: 1 });
+    /// ```
     pub fn new(entries: &'a [TfEntry], lo: f32, hi: f32) -> Result<Self, VolumeError> {
         if entries.is_empty() || entries.len() > Self::MAX_ENTRIES {
             return Err(VolumeError::EmptyTable);
@@ -178,18 +265,40 @@ impl<'a> TransferFunction<'a> {
     }
 
     /// The table.
+    ///
+    /// ```
+    /// use strahl::volume::{TfEntry, TransferFunction};
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    /// assert!(core::ptr::eq(tf.entries(), &table[..])); // borrowed, not copied
+    /// ```
     #[inline]
     pub fn entries(&self) -> &'a [TfEntry] {
         self.entries
     }
 
     /// The scalar range `(lo, hi)` the table spans.
+    ///
+    /// ```
+    /// use strahl::volume::{TfEntry, TransferFunction};
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 2.0)];
+    /// let tf = TransferFunction::new(&table, -10.0, 30.0).unwrap();
+    /// assert_eq!(tf.range(), (-10.0, 30.0));
+    /// assert_eq!(tf.lookup_scalar(tf.range().1).0, 2.0); // the top of the range reads the last entry
+    /// ```
     #[inline]
     pub fn range(&self) -> (f32, f32) {
         (self.lo, self.hi)
     }
 
     /// Largest `|c|` over all entries and channels: the factor in the early-termination bound.
+    ///
+    /// ```
+    /// use strahl::volume::{TfEntry, TransferFunction};
+    /// let table = [TfEntry::new([0.5, -3.0, 1.0], 0.0), TfEntry::new([2.0, 0.0, 0.25], 1.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 1.0).unwrap();
+    /// assert_eq!(tf.max_color(), 3.0); // by magnitude, transparent entries included
+    /// ```
     pub fn max_color(&self) -> f32 {
         self.entries
             .iter()
@@ -207,6 +316,16 @@ impl<'a> TransferFunction<'a> {
     ///
     /// Reads entries `j` and `j + 1` with `j = min(floor(u), n - 2)` and weight `w = u - j` (so
     /// `w = 1` at the top of the range); a one-entry table is constant.
+    ///
+    /// ```
+    /// use strahl::volume::{TfEntry, TransferFunction};
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.0], 4.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 2.0).unwrap();
+    /// assert_eq!(tf.lookup_scalar(0.5), (1.0, [0.25, 0.125, 0.0])); // u = 0.25
+    /// assert_eq!(tf.lookup_scalar(-1.0), (0.0, [0.0; 3])); // clamped to entry 0
+    /// let one = [TfEntry::new([0.2; 3], 7.0)];
+    /// assert_eq!(TransferFunction::new(&one, 0.0, 1.0).unwrap().lookup_scalar(123.0), (7.0, [0.2; 3]));
+    /// ```
     #[inline(always)]
     pub fn lookup_scalar(&self, s: f32) -> (f32, [f32; 3]) {
         if self.last_idx == 0 {
@@ -229,6 +348,19 @@ impl<'a> TransferFunction<'a> {
     }
 
     /// Eight lookups; lane `i` equals [`lookup_scalar`](Self::lookup_scalar) of lane `i` bit for bit.
+    ///
+    /// ```
+    /// use strahl::{math::f32x8, volume::{TfEntry, TransferFunction}};
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.5, 0.2], 3.0), TfEntry::new([0.1, 0.9, 0.3], 0.7)];
+    /// let tf = TransferFunction::new(&table, 10.0, 50.0).unwrap();
+    /// let s = [-5.0, 10.0, 17.3, 29.9, 30.0, 41.7, 50.0, f32::NAN];
+    /// let (tau, c) = tf.lookup_x8(f32x8::new(s));
+    /// for (i, &si) in s.iter().enumerate() {
+    ///     let (t, col) = tf.lookup_scalar(si);
+    ///     assert_eq!(tau.to_array()[i].to_bits(), t.to_bits());
+    ///     assert!((0..3).all(|ch| c[ch].to_array()[i].to_bits() == col[ch].to_bits()));
+    /// }
+    /// ```
     #[inline(always)]
     pub fn lookup_x8(&self, s: f32x8) -> (f32x8, [f32x8; 3]) {
         if self.last_idx == 0 {
@@ -254,6 +386,16 @@ impl<'a> TransferFunction<'a> {
     /// interpolation can take a value outside the range of its voxels, and the entry after the
     /// last one reached is checked too (interpolation reads it). A NaN bound, or `min > max`, checks
     /// the whole table.
+    ///
+    /// ```
+    /// use strahl::volume::{TfEntry, TransferFunction};
+    /// // Entries at 0, 10, 20, 30: only the one at 30 has extinction.
+    /// let table = [TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::TRANSPARENT, TfEntry::new([1.0; 3], 1.0)];
+    /// let tf = TransferFunction::new(&table, 0.0, 30.0).unwrap();
+    /// assert!(tf.is_transparent(0.0, 15.0));
+    /// assert!(!tf.is_transparent(0.0, 25.0)); // values above 20 interpolate towards the entry at 30
+    /// assert!(!tf.is_transparent(f32::NAN, 1.0)); // checks the whole table
+    /// ```
     pub fn is_transparent(&self, min: f32, max: f32) -> bool {
         let (a, b) = if min <= max {
             let pad = (crate::math::abs(min) + crate::math::abs(max)) * (1.0 / 65536.0) + f32::MIN_POSITIVE;
@@ -269,6 +411,16 @@ impl<'a> TransferFunction<'a> {
 
     /// A hash of what empty-space classification depends on: the range, the table length and which
     /// entries have zero extinction (colours do not matter). FNV-1a, 64 bits.
+    ///
+    /// ```
+    /// use strahl::volume::{TfEntry, TransferFunction};
+    /// let red = [TfEntry::TRANSPARENT, TfEntry::new([1.0, 0.0, 0.0], 2.0)];
+    /// let blue = [TfEntry::TRANSPARENT, TfEntry::new([0.0, 0.0, 1.0], 5.0)];
+    /// let fp = |t: &[TfEntry], hi: f32| TransferFunction::new(t, 0.0, hi).unwrap().fingerprint();
+    /// assert_eq!(fp(&red, 1.0), fp(&blue, 1.0)); // same empty entries: a grid classified for one fits both
+    /// assert_ne!(fp(&red, 1.0), fp(&red, 2.0)); // another range
+    /// assert_ne!(fp(&red, 1.0), fp(&[TfEntry::new([0.0; 3], 1.0), red[1]], 1.0)); // entry 0 no longer empty
+    /// ```
     pub fn fingerprint(&self) -> u64 {
         const PRIME: u64 = 0x0000_0100_0000_01b3;
         let mut h: u64 = 0xcbf2_9ce4_8422_2325;

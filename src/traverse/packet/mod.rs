@@ -69,12 +69,41 @@ use crate::traverse::Bvh2Ref;
 /// Interval culling needs directions within this cosine (about 18 degrees) of the packet's first
 /// ray; other packets walk with lane masks. A camera tile of 4 x 4 pixels spans well under a
 /// degree.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Watertight, packet}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// // Directions fanning out to 19 degrees from the first: past the cone, so the packet walks with lane masks.
+/// let rays: Vec<Ray> = (0..8)
+///     .map(|i| Ray::new(Vec3::new(0.0, 0.0, -3.0), Vec3::new(0.05 * i as f32, 0.0, 1.0)))
+///     .collect();
+/// assert!(rays[7].direction.normalize().z < packet::COHERENT_MIN_COS);
+/// let mut hits = [None; 8];
+/// packet::intersect8::<Watertight, _, 8>(b8.view(), &rays, &mut hits, 0);
+/// assert!(rays.iter().zip(hits).all(|(r, h)| h == b8.intersect::<Watertight>(r))); // the same hits
+/// ```
 pub const COHERENT_MIN_COS: f32 = 0.95;
 
 /// Interval culling needs origins within this fraction of the tree's extent (largest axis of the
 /// root's box) on every axis. The walk is exact for any packet, but it visits the union of the
 /// lanes' paths: 4 diffuse rays from scattered surface points with the same direction signs
 /// (1 packet in 500) visited most of a 262k-triangle tree and cost 5x the whole batch.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Watertight, packet}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// // Parallel rays whose origins span 1.4, far more than 1/64 of the sphere's extent of 2:
+/// // the packet walks with lane masks, and answers as single rays do.
+/// let rays: Vec<Ray> = (0..8).map(|i| Ray::new(Vec3::new(0.2 * i as f32 - 0.7, 0.1, -3.0), Vec3::Z)).collect();
+/// let mut occluded = [false; 8];
+/// packet::occluded8::<Watertight, _, 8>(b8.view(), &rays, &mut occluded);
+/// assert!(rays.iter().zip(occluded).all(|(r, o)| o == b8.occluded::<Watertight>(r)));
+/// assert_eq!(occluded, [true; 8]);
+/// ```
 pub const COHERENT_MAX_ORIGIN_SPREAD: f32 = 1.0 / 64.0;
 
 /// Switch to single rays where fewer than this many of 8 lanes enter a node, in packets whose
@@ -82,18 +111,60 @@ pub const COHERENT_MAX_ORIGIN_SPREAD: f32 = 1.0 / 64.0;
 /// sphereflake, 200k rays): thresholds 3, 5, 7 ran at 0.6-1.0x single rays, 9 (every such packet
 /// starts as single rays at the root) at 1.0x, pure packets (0) at 0.3x. Coherent packets (shared
 /// direction signs) always use interval culling.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Watertight, packet}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// // Incoherent rays (from the centre into the eight octants): single rays from the root.
+/// let s = |i: u32, bit: u32| if i & bit == 0 { 1.0 } else { -1.0 };
+/// let rays: Vec<_> = (0..8).map(|i| Ray::new(Vec3::ZERO, Vec3::new(s(i, 1), 0.8 * s(i, 2), 0.6 * s(i, 4)))).collect();
+/// let (mut hybrid, mut pure) = ([None; 8], [None; 8]);
+/// packet::intersect8::<Watertight, _, 8>(b8.view(), &rays, &mut hybrid, packet::DEFAULT_SWITCH);
+/// packet::intersect8::<Watertight, _, 8>(b8.view(), &rays, &mut pure, 0);
+/// assert_eq!(hybrid, pure);
+/// assert!(hybrid.iter().all(Option::is_some));
+/// ```
 pub const DEFAULT_SWITCH: u32 = 9;
 
 /// [`DEFAULT_SWITCH`] for packets of 4: `5`, every incoherent packet runs as single rays from the
 /// root. Measured (`benches/packet.rs`' diffuse rays, best of 5, BVH8, noisy 2-core machine):
 /// thresholds 2, 3, 5 ran at 0.58-0.79x single rays on the bunny and 0.85-0.90x on the
 /// sphereflake; 5 was the best or within noise of it; pure packets (1) at 0.15-0.43x.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh4, traverse::{Moller, packet}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+/// assert!(packet::DEFAULT_SWITCH4 > 4); // more than a packet's lanes: every incoherent packet starts as single rays
+/// let dirs = [Vec3::X, -Vec3::Y, Vec3::new(0.3, 0.4, -1.0), Vec3::new(-1.0, 0.5, 0.5)];
+/// let rays = dirs.map(|d| Ray::new(Vec3::ZERO, d));
+/// let mut hits = [None; 4];
+/// packet::intersect4::<Moller, _, 4>(b4.view(), &rays, &mut hits, packet::DEFAULT_SWITCH4);
+/// assert!(rays.iter().zip(hits).all(|(r, h)| h == b4.intersect::<Moller>(r)));
+/// ```
 pub const DEFAULT_SWITCH4: u32 = 5;
 
 /// [`DEFAULT_SWITCH`] for packets of 16: `17`, every incoherent packet runs as single rays from
 /// the root. Measured as for [`DEFAULT_SWITCH4`]: thresholds 2, 4, 8, 12, 17 ran at 0.39, 0.54,
 /// 0.67, 0.71, 0.75x single rays on the bunny and 0.72, 0.82, 0.87, 0.82, 0.84x on the
 /// sphereflake (8 and 17 within noise there, 17 clearly best on the bunny).
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Watertight, packet}};
+/// # let tris = strahl::scene::icosphere(2).to_soup();
+/// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// // Incoherent rays (from the centre, every sign of x and y): single rays from the root.
+/// let rays: Vec<Ray> = (0..16)
+///     .map(|i| Ray::new(Vec3::ZERO, Vec3::new((i % 4) as f32 - 1.5, (i / 4) as f32 - 1.5, 0.5)))
+///     .collect();
+/// let mut hits = [None; 16];
+/// packet::intersect16::<Watertight, _, 8>(b8.view(), &rays, &mut hits, packet::DEFAULT_SWITCH16);
+/// assert!(rays.iter().zip(hits).all(|(r, h)| h == b8.intersect::<Watertight>(r)));
+/// ```
 pub const DEFAULT_SWITCH16: u32 = 17;
 
 /// The default hybrid threshold for packets of `rays` rays: [`DEFAULT_SWITCH4`],

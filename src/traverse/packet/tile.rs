@@ -32,14 +32,49 @@ pub struct TileShape {
 
 impl TileShape {
     /// 4 x 1 pixels (4 rays).
+    ///
+    /// ```
+    /// use strahl::traverse::packet::TileShape;
+    /// let t = TileShape::X4_1;
+    /// assert_eq!(t.rays(), 4);
+    /// assert_eq!((t.pixel(3, 8), t.pixel(4, 8), t.pixel(8, 8)), ((3, 0), (4, 0), (0, 1))); // one row per tile
+    /// ```
     pub const X4_1: Self = Self { w: 4, h: 1 };
     /// 2 x 2 pixels (4 rays).
+    ///
+    /// ```
+    /// use strahl::traverse::packet::TileShape;
+    /// let t = TileShape::X2_2;
+    /// assert_eq!(t, TileShape::for_rays(4));
+    /// assert_eq!((t.pixel(1, 8), t.pixel(2, 8), t.pixel(4, 8)), ((1, 0), (0, 1), (2, 0)));
+    /// ```
     pub const X2_2: Self = Self { w: 2, h: 2 };
     /// 4 x 2 pixels (8 rays).
+    ///
+    /// ```
+    /// use strahl::traverse::packet::TileShape;
+    /// let t = TileShape::X4_2;
+    /// assert_eq!((t, t.rays()), (TileShape::for_rays(8), 8));
+    /// assert_eq!((t.pixel(4, 8), t.pixel(7, 8)), ((0, 1), (3, 1)));
+    /// ```
     pub const X4_2: Self = Self { w: 4, h: 2 };
     /// 4 x 4 pixels (16 rays).
+    ///
+    /// ```
+    /// use strahl::traverse::packet::TileShape;
+    /// let t = TileShape::X4_4;
+    /// assert_eq!((t, t.rays()), (TileShape::for_rays(16), 16));
+    /// assert_eq!((t.pixel(15, 8), t.pixel(16, 8)), ((3, 3), (4, 0)));
+    /// ```
     pub const X4_4: Self = Self { w: 4, h: 4 };
     /// 8 x 2 pixels (16 rays).
+    ///
+    /// ```
+    /// use strahl::traverse::packet::TileShape;
+    /// let t = TileShape::X8_2;
+    /// assert_eq!(t.rays(), TileShape::X4_4.rays()); // 16 rays, wider and flatter
+    /// assert_eq!((t.pixel(7, 16), t.pixel(8, 16), t.pixel(16, 16)), ((7, 0), (0, 1), (8, 0)));
+    /// ```
     pub const X8_2: Self = Self { w: 8, h: 2 };
 
     /// The square-most preset for a packet of `rays` rays (4: 2 x 2, 8: 4 x 2, 16: 4 x 4), else
