@@ -72,7 +72,9 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
-use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, BvhStats, MortonBits, Node, Refine, TreeletParams};
+use strahl::build::{
+    BinAxes, BuildParams, Builder, Bvh2, BvhStats, MortonBits, Node, Refine, ReinsertParams, TreeletParams,
+};
 use strahl::geometry::Triangle;
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
@@ -183,6 +185,13 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
             BuildParams {
                 refine: Refine::Rotations(1),
                 ..BuildParams::fastest()
+            },
+        ),
+        (
+            "binned64-all+reinsertion",
+            BuildParams {
+                refine: Refine::Reinsertion(ReinsertParams::new()),
+                ..BuildParams::high()
             },
         ),
         (

@@ -3,7 +3,8 @@
 //! primitives, with both triangle tests.
 
 use strahl::build::{
-    BinAxes, BuildError, BuildParams, Bvh2, MortonBits, MortonCells, Refine, Strategy, TreeletParams, ValidateError,
+    BinAxes, BuildError, BuildParams, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy, TreeletParams,
+    ValidateError,
 };
 use strahl::geometry::{Triangle, TriangleSoup, Triangles};
 use strahl::scene::{self, Rng};
@@ -120,6 +121,23 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
             BuildParams {
                 refine: Refine::Rotations(2),
                 ..BuildParams::fastest()
+            },
+        ),
+        (
+            "lbvh-reinsert",
+            BuildParams {
+                refine: Refine::Reinsertion(ReinsertParams {
+                    rounds: 3,
+                    per_mille: 1000,
+                }),
+                ..BuildParams::fastest()
+            },
+        ),
+        (
+            "binned-reinsert",
+            BuildParams {
+                refine: Refine::Reinsertion(ReinsertParams::default()),
+                ..BuildParams::fast()
             },
         ),
         (
@@ -622,6 +640,12 @@ fn invalid_params_are_errors() {
         },
     ]
     .into_iter()
+    .chain(
+        [(0, 10), (65, 10), (1, 0), (1, 1001)].map(|(rounds, per_mille)| BuildParams {
+            refine: Refine::Reinsertion(ReinsertParams { rounds, per_mille }),
+            ..base
+        }),
+    )
     .chain(
         [(2, 1, 1), (9, 1, 1), (7, 0, 1), (7, 1, 0), (7, 1, 17)].map(|(leaves, min_prims, rounds)| BuildParams {
             refine: Refine::Treelets(TreeletParams {

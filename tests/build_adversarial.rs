@@ -31,8 +31,8 @@ use std::fmt::Display;
 use std::sync::mpsc;
 use std::time::Duration;
 use strahl::build::{
-    BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Primitives, Refine, Strategy, TreeletParams,
-    ValidateError,
+    BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Primitives, Refine, ReinsertParams, Strategy,
+    TreeletParams, ValidateError,
 };
 use strahl::geometry::{Hit, Triangle};
 use strahl::layout::{Bvh4, Bvh8};
@@ -188,6 +188,27 @@ fn params() -> Vec<(String, BuildParams)> {
                 "tre8",
                 BuildParams {
                     refine: treelets(8, 3),
+                    ..b
+                },
+            ),
+            (
+                "re200",
+                BuildParams {
+                    refine: Refine::Reinsertion(ReinsertParams {
+                        rounds: 2,
+                        per_mille: 200,
+                    }),
+                    ..b
+                },
+            ),
+            (
+                "re-d34",
+                BuildParams {
+                    refine: Refine::Reinsertion(ReinsertParams {
+                        rounds: 4,
+                        per_mille: 300,
+                    }),
+                    max_depth: 34,
                     ..b
                 },
             ),

@@ -4,7 +4,7 @@
 //! warm its [`Builder`], then `STRAHL_REPS` timed builds (default 5), best and median. `STRAHL_N`
 //! sets the soup size (`scene::thin_soup(n, 1)`, default 2^20); `STRAHL_ONLY` a comma-separated
 //! list of builders (`fastest`, `lbvh63`, `fast`, `binned8all`, `balanced`, `high`, `median`, `quality`,
-//! `hlbvh`, `hybrid_sah`; `*_normalized`: the Morton builders on the classic per-axis grid,
+//! `hlbvh`, `hybrid_sah`, `*_reinsert` (`balanced`, `high`, `fastest` with [`ReinsertParams::new`]); `*_normalized`: the Morton builders on the classic per-axis grid,
 //! [`MortonCells::Normalized`]). `STRAHL_SCENE` picks the scene: `soup` (default), `terrain`
 //! (`scene::terrain(724, 1)`, 1M triangles, 5:1 flat), `sphereflake` (`scene::sphereflake(3, 3)`)
 //! or `bunny`. `STRAHL_THREADS=t` (t > 1) also times `Builder::build_into_par` on `t`
@@ -12,7 +12,7 @@
 //! speed-up; "CPU" is then the calling thread's only.
 
 use std::time::Instant;
-use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Strategy};
+use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy};
 use strahl::scene;
 
 #[test]
@@ -63,6 +63,27 @@ fn speed() {
         ("balanced", BuildParams::balanced()),
         ("high", BuildParams::high()),
         ("hybrid_sah", BuildParams::hybrid_sah()),
+        (
+            "balanced_reinsert",
+            BuildParams {
+                refine: Refine::Reinsertion(ReinsertParams::new()),
+                ..BuildParams::balanced()
+            },
+        ),
+        (
+            "high_reinsert",
+            BuildParams {
+                refine: Refine::Reinsertion(ReinsertParams::new()),
+                ..BuildParams::high()
+            },
+        ),
+        (
+            "fastest_reinsert",
+            BuildParams {
+                refine: Refine::Reinsertion(ReinsertParams::new()),
+                ..BuildParams::fastest()
+            },
+        ),
         ("fastest_normalized", normalized(BuildParams::fastest())),
         ("ploc_normalized", normalized(BuildParams::ploc())),
         ("hybrid_sah_normalized", normalized(BuildParams::hybrid_sah())),

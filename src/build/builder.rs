@@ -73,6 +73,8 @@ pub struct Builder {
     pub(crate) walk: WalkStack,
     /// Treelet restructuring's per-node state.
     pub(crate) treelet: TreeletScratch,
+    /// Reinsertion's per-node state.
+    pub(crate) reinsert: super::reinsert::ReinsertScratch,
     /// The parallel build's per-worker arrays (`std`).
     #[cfg(feature = "std")]
     pub(crate) par: Vec<super::topdown::ParScratch>,
@@ -256,6 +258,14 @@ impl Builder {
                 stats.restructured = r.restructured;
             }
         }
+        if let (Refine::Reinsertion(r), true) = (params.refine, n > 0) {
+            // NOTE: a tree just built is well formed; the pass cannot fail on it.
+            if let Ok(r) = super::reinsert::optimize(out, &r, params.max_depth, &mut self.reinsert) {
+                stats.max_depth = r.max_depth;
+                stats.restructured = r.moved;
+                stats.nodes = out.nodes.len() as u32;
+            }
+        }
         Ok(stats)
     }
 
@@ -280,5 +290,27 @@ impl Builder {
     ) -> Result<TreeletStats, ValidateError> {
         let max_depth = max_depth.min(crate::traverse::MAX_DEPTH);
         treelet::optimize(bvh, params, max_depth, &mut self.treelet)
+    }
+
+    /// [`Bvh2::optimize_reinsertion`] with this builder's memory (kept for the next call).
+    ///
+    /// ```
+    /// use strahl::{build::{Builder, BuildParams, ReinsertParams}, scene};
+    /// let soup = scene::clustered_soup(3000, 5, 1);
+    /// let mut builder = Builder::new();
+    /// let (mut bvh, _) = builder.build(&soup[..], &BuildParams::fast()).unwrap();
+    /// let before = bvh.sah_cost(1.0, 1.0);
+    /// builder.optimize_reinsertion(&mut bvh, &ReinsertParams::default(), 64).unwrap();
+    /// assert!(bvh.sah_cost(1.0, 1.0) <= before);
+    /// assert!(bvh.validate(&soup[..]).is_ok());
+    /// ```
+    pub fn optimize_reinsertion(
+        &mut self,
+        bvh: &mut Bvh2,
+        params: &super::ReinsertParams,
+        max_depth: u32,
+    ) -> Result<super::ReinsertStats, ValidateError> {
+        let max_depth = max_depth.min(crate::traverse::MAX_DEPTH);
+        super::reinsert::optimize(bvh, params, max_depth, &mut self.reinsert)
     }
 }

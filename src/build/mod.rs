@@ -1,5 +1,6 @@
 //! BVH2 construction: [`Bvh2`] and its builders (object median, full-sweep SAH, binned SAH,
-//! LBVH, HLBVH), treelet restructuring ([`Bvh2::optimize_treelets`]), [`Bvh2::validate`],
+//! LBVH, HLBVH, PLOC), treelet restructuring ([`Bvh2::optimize_treelets`]), tree rotations
+//! ([`Bvh2::optimize_rotations`]), reinsertion ([`Bvh2::optimize_reinsertion`]), [`Bvh2::validate`],
 //! [`Bvh2::refit`] and [`Bvh2::sah_cost`].
 //!
 //! Pipeline stage: after [`geometry`](crate::geometry), before `layout` (wide nodes) and
@@ -22,6 +23,7 @@
 //! | [`HlbvhSah`](Strategy::HlbvhSah) | HLBVH clusters with Bonsai-style SAH mini-trees, pruned on multi-scale scenes (Ganestam et al. 2015) | the binned builder within each cluster, in cache | O(n) sort, plus binned SAH over the clusters and within them |
 //! | [`Ploc`](Strategy::Ploc) | Meister and Bittner 2018 (search radius 1) | Morton-sorted clusters merged bottom-up with the neighbour of smaller union area, where the two prefer each other; one-primitive leaves | O(n log n) after a radix sort; O(n) rounds on even scenes |
 //! | [`Refine::Rotations`] (after any of them) | Kensler 2008 | the best of six child/grandchild swaps where it shrinks the two children's boxes | O(n) per round |
+//! | [`Refine::Reinsertion`] (after any of them) | Bittner, Hapala and Havran 2013 (one subtree per move, as Meister and Bittner 2018) | take a subtree out, put it back where the SAH cost grows least (branch and bound over the tree) | about `n log n` per round over every node |
 //! | [`Refine::Treelets`] (after any of them) | Karras and Aila 2013 (TRBVH) | best topology of a 3 ..= 8-leaf treelet by dynamic programming over its leaf subsets, `~3^k / 2` steps | O(n) per round |
 //!
 //! The top-down builders share one loop (pbrt's `BUILD(node)`: split, group left and right,
@@ -291,6 +293,7 @@ mod ploc;
 mod prims;
 pub mod radix;
 mod refit;
+mod reinsert;
 mod rotate;
 mod small;
 mod sweep;
@@ -306,6 +309,7 @@ pub use params::{
     Refine, Strategy, TreeletParams,
 };
 pub use prims::{MAX_PRIMITIVES, Primitives};
+pub use reinsert::{ReinsertParams, ReinsertStats};
 pub use rotate::RotationStats;
 pub use treelet::TreeletStats;
 pub use validate::{BvhStats, ValidateError};

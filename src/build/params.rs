@@ -86,6 +86,10 @@ pub enum Refine {
     /// [`Bvh2::optimize_rotations`](super::Bvh2::optimize_rotations): cheap, local, and never
     /// worse by the SAH.
     Rotations(u32),
+    /// Reinsertion (Bittner et al. 2013), see
+    /// [`Bvh2::optimize_reinsertion`](super::Bvh2::optimize_reinsertion): subtrees moved to where
+    /// they cost least; never worse by the SAH.
+    Reinsertion(super::ReinsertParams),
 }
 
 /// The knobs of treelet restructuring ([`Refine::Treelets`],
@@ -643,6 +647,14 @@ impl BuildParams {
             }
             if !(1..=16).contains(&t.rounds) {
                 return bad("refine: treelet rounds must be in 1 ..= 16");
+            }
+        }
+        if let Refine::Reinsertion(r) = self.refine {
+            if !(1..=64).contains(&r.rounds) {
+                return bad("refine: reinsertion rounds must be in 1 ..= 64");
+            }
+            if !(1..=1000).contains(&r.per_mille) {
+                return bad("refine: reinsertion per_mille must be in 1 ..= 1000");
             }
         }
         Ok(())
