@@ -792,6 +792,65 @@ fn validate_names_what_broke() {
     ));
 }
 
+/// A leaf whose every triangle has become NaN: `refit` gives it the empty box and `validate`
+/// names it `EmptyNode` (not `BoxNotFinite`, though `Aabb::EMPTY`'s bounds are infinite); a
+/// subtree of two such leaves is named at its top; a NaN box is still `BoxNotFinite`.
+#[test]
+fn validate_names_a_leaf_refit_left_empty() {
+    let tris = scene::thin_soup(200, 5);
+    for (name, p) in builders() {
+        let (good, _) = Bvh2::build(&tris[..], &p).unwrap();
+        if good.nodes.len() < 3 {
+            continue;
+        }
+        // Every triangle of one leaf NaN.
+        let leaf = good.nodes.iter().position(|n| n.is_leaf()).unwrap();
+        let mut nan = tris.clone();
+        for &prim in &good.prim_indices[good.nodes[leaf].prim_range()] {
+            nan[prim as usize][1] = Vec3::NAN;
+        }
+        let mut b = good.clone();
+        b.refit(&nan[..]).unwrap();
+        assert_eq!(b.nodes[leaf].aabb(), Aabb::EMPTY, "{name}");
+        assert_eq!(
+            b.validate(&nan[..]),
+            Err(ValidateError::EmptyNode { node: leaf as u32 }),
+            "{name}"
+        );
+        // Both leaves below an interior node: the interior node is named (the first met).
+        if let Some(parent) = good.nodes.iter().position(|n| {
+            !n.is_leaf() && good.nodes[n.left() as usize].is_leaf() && good.nodes[n.right() as usize].is_leaf()
+        }) {
+            let mut nan = tris.clone();
+            for child in [good.nodes[parent].left(), good.nodes[parent].right()] {
+                for &prim in &good.prim_indices[good.nodes[child as usize].prim_range()] {
+                    nan[prim as usize][0].x = f32::NAN;
+                }
+            }
+            let mut b = good.clone();
+            b.refit(&nan[..]).unwrap();
+            assert_eq!(
+                b.validate(&nan[..]),
+                Err(ValidateError::EmptyNode { node: parent as u32 }),
+                "{name}"
+            );
+        }
+        // Refitted back: valid again.
+        b.refit(&tris[..]).unwrap();
+        assert_eq!(b.validate(&tris[..]), good.validate(&tris[..]), "{name}");
+    }
+    // Every triangle NaN: the root.
+    let (mut b, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let all_nan = vec![[Vec3::NAN; 3]; tris.len()];
+    b.refit(&all_nan[..]).unwrap();
+    assert_eq!(b.validate(&all_nan[..]), Err(ValidateError::EmptyNode { node: 0 }));
+    // A NaN bound, empty or not, is not finite.
+    let (mut b, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    b.nodes[0].min[0] = f32::NAN;
+    b.nodes[0].min[1] = b.nodes[0].max[1] + 1.0;
+    assert_eq!(b.validate(&tris[..]), Err(ValidateError::BoxNotFinite { node: 0 }));
+}
+
 #[test]
 fn sah_cost_orders_the_builders() {
     // On an ordinary mesh the SAH builders beat the median and the LBVH, and sweep beats binned.

@@ -910,8 +910,8 @@ fn triangle_beyond_range_is_left_out() {
 
 /// `Bvh2::refit` to a triangle moved beyond the range (from x = 2 out to x = 2e38) succeeds and
 /// leaves the moved triangle out of its leaf's box; the tree still references it, so `validate`
-/// names it (`InvalidPrimReferenced`), or, where it was alone in its leaf, that leaf's box, which
-/// is now empty (`BoxNotFinite`: `Aabb::EMPTY` has infinite bounds). Rays never hit it: brute
+/// names it (`InvalidPrimReferenced`), or, where it was alone in its leaf, that leaf, whose box
+/// is now empty (`EmptyNode`: `Aabb::EMPTY`). Rays never hit it: brute
 /// force's closest hits over the other triangles. Refitting back into range makes the tree valid
 /// again and hit it. Every preset, and leaves of 1 and of 3 triangles (both cases occur).
 #[test]
@@ -955,7 +955,7 @@ fn refit_beyond_range_leaves_triangle_out() {
         let expected = if bvh.nodes[leaf].count == 1 {
             alone += 1;
             assert_eq!(bvh.nodes[leaf].aabb(), Aabb::EMPTY, "{pname}");
-            ValidateError::BoxNotFinite { node: leaf as u32 }
+            ValidateError::EmptyNode { node: leaf as u32 }
         } else {
             shared += 1;
             ValidateError::InvalidPrimReferenced { prim: 2 }

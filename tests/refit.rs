@@ -1,8 +1,8 @@
 //! `BvhWide::refit`: a refit with unchanged triangles changes no bit of the tree; after the
 //! triangles move (rigidly, by jitter larger than themselves, through shared vertices of an
-//! indexed mesh, onto one point), become non-finite or go missing, every child box is the exact
-//! box of the finite triangles below it, and BVH4/BVH8 closest and any hits equal brute force's
-//! over the moved triangles.
+//! indexed mesh, onto one point), become non-finite, move beyond the range the builders accept
+//! or go missing, every child box is the exact box of the kept triangles below it, and BVH4/BVH8
+//! closest and any hits equal brute force's over the moved triangles the tree keeps.
 
 mod common;
 
@@ -14,6 +14,20 @@ use strahl::math::{Lane, f32x4, f32x8};
 use strahl::scene::{self, Rng};
 use strahl::traverse::{Moller, Watertight, intersect_brute_force, occluded_brute_force};
 use strahl::{Ray, Vec3};
+
+/// `true` if a refit keeps `t` in the tree: the builders' rule (`Primitives`, `Bvh2::refit`),
+/// finite vertices and a box whose extent and `min + max` are finite (no coordinate beyond about
+/// `±1.7e38`).
+fn kept(t: &Triangle) -> bool {
+    let (lo, hi) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+    t.iter().all(|v| v.is_finite()) && (hi - lo).is_finite() && (hi + lo).is_finite()
+}
+
+/// `tris` with every triangle a refit leaves out made NaN (never hit by brute force), so that
+/// brute force's answers are the tree's.
+fn kept_only(tris: &[Triangle]) -> Vec<Triangle> {
+    tris.iter().map(|t| if kept(t) { *t } else { [Vec3::NAN; 3] }).collect()
+}
 
 /// Every word of two trees, lane by lane (`to_bits`), the same; a box edge of `-0.0` counts as
 /// `+0.0` (the collapse and the refit may take a zero's sign from different triangles).
@@ -37,7 +51,7 @@ fn identical<L: Lane, const N: usize>(a: &BvhWide<L, N>, b: &BvhWide<L, N>) -> b
         })
 }
 
-/// The exact box of the finite triangles (read from `tris`) below child code `code`, checked
+/// The exact box of the kept triangles (read from `tris`) below child code `code`, checked
 /// against every lane on the way: each child box must be exactly what it holds. Returns the box
 /// and counts the triangles seen in `seen`.
 fn check_boxes<L: Lane, const N: usize, P: Triangles + ?Sized>(
@@ -56,7 +70,7 @@ fn check_boxes<L: Lane, const N: usize, P: Triangles + ?Sized>(
                 }
                 seen.push(p);
                 match tris.triangle(p as usize) {
-                    Some(t) if t.iter().all(|v| v.is_finite()) => {
+                    Some(t) if kept(&t) => {
                         assert_eq!(pack.get(i), t, "prim {p}: lane not refilled");
                         for v in t {
                             (lo, hi) = (lo.min(v), hi.max(v));
@@ -85,11 +99,10 @@ fn check_boxes<L: Lane, const N: usize, P: Triangles + ?Sized>(
 }
 
 /// Refits `bvh` to `tris` and checks it: the left-out count, the boxes, each triangle of the
-/// tree seen once, and closest and any hits against brute force over `tris` on mixed rays.
+/// tree seen once, and closest and any hits against brute force over the kept triangles of
+/// `tris` on mixed rays.
 fn refit_and_check<L: Lane, const N: usize>(bvh: &mut BvhWide<L, N>, tris: &[Triangle], n_prims: usize, what: &str) {
-    let want_out = (0..n_prims)
-        .filter(|&p| !tris.get(p).is_some_and(|t| t.iter().all(|v| v.is_finite())))
-        .count();
+    let want_out = (0..n_prims).filter(|&p| !tris.get(p).is_some_and(kept)).count();
     assert_eq!(bvh.refit(tris), want_out, "{what}");
     let mut seen = Vec::new();
     if !bvh.is_empty() {
@@ -101,12 +114,10 @@ fn refit_and_check<L: Lane, const N: usize>(bvh: &mut BvhWide<L, N>, tris: &[Tri
         (0..n_prims as u32).collect::<Vec<_>>(),
         "{what}: each triangle once"
     );
-    // Rays over the finite triangles (mixed_rays skips nothing: it needs some triangles).
-    let finite: Vec<Triangle> = tris
-        .iter()
-        .copied()
-        .filter(|t| t.iter().all(|v| v.is_finite()))
-        .collect();
+    // Rays over the kept triangles (mixed_rays skips nothing: it needs some triangles).
+    let finite: Vec<Triangle> = tris.iter().copied().filter(kept).collect();
+    let kept_tris = kept_only(tris);
+    let tris = &kept_tris[..];
     let rays = if finite.is_empty() {
         vec![Ray::new(Vec3::splat(-1.0), Vec3::ONE)]
     } else {
@@ -153,6 +164,10 @@ fn motions(tris: &[Triangle], seed: u64) -> Vec<(&'static str, Vec<Triangle>)> {
         match i % 7 {
             0 => t[1].y = f32::NAN,
             3 => t[2].x = f32::INFINITY,
+            // Finite, but beyond the range: `min + max` overflows.
+            5 => *t = t.map(|v| v + Vec3::new(1.8e38, 0.0, 0.0)),
+            // Finite, but the extent overflows.
+            6 => (t[0].z, t[1].z) = (-3e38, 3e38),
             _ => {}
         }
     }
@@ -160,7 +175,7 @@ fn motions(tris: &[Triangle], seed: u64) -> Vec<(&'static str, Vec<Triangle>)> {
         ("rigid", rigid),
         ("jitter", jitter),
         ("point", point),
-        ("non-finite", broken),
+        ("non-finite or beyond the range", broken),
     ]
 }
 
@@ -278,6 +293,68 @@ fn indexed_meshes_refit_through_shared_vertices() {
         .count();
     mesh.positions.pop();
     assert_eq!(b8.refit(&mesh.as_indexed()), using);
+}
+
+/// A triangle moved out beyond about `±1.7e38` (finite, but its box's `min + max` overflows) is
+/// left out by `BvhWide::refit` and `refit_par` as by `Bvh2::refit` and the builders: counted,
+/// never hit, in no box; back in range, it is hit again.
+#[test]
+fn refit_leaves_out_triangles_beyond_the_range() {
+    fn check<L: Lane + Send, const N: usize>() {
+        let near: Vec<Triangle> = (0..40)
+            .map(|i| {
+                let x = 2.0 * i as f32;
+                [Vec3::new(x, 0.0, 0.0), Vec3::new(x, 1.0, 0.0), Vec3::new(x, 0.0, 1.0)]
+            })
+            .collect();
+        let mut far = near.clone();
+        far[7] = far[7].map(|v| v + Vec3::new(2e38, 0.0, 0.0)); // x = 2e38 + 14 = 2e38
+        let mut wide = far.clone();
+        wide[9] = [
+            Vec3::new(-3e38, 0.0, 0.0),
+            Vec3::new(3e38, 1.0, 0.0),
+            Vec3::new(18.0, 0.0, 1.0),
+        ];
+        // From x = 13 along +x: the triangles at x = 14, ..., then (far) at x = 2e38.
+        let ray = Ray::new(Vec3::new(13.0, 0.2, 0.2), Vec3::X);
+        let beyond = Ray::new(Vec3::new(100.0, 0.2, 0.2), Vec3::X); // only the far one ahead
+        let (b2, _) = Bvh2::build(&near[..], &BuildParams::default()).unwrap();
+        let tree = BvhWide::<L, N>::from_bvh2(&b2, &near[..]).unwrap();
+        assert_eq!(tree.intersect::<Watertight>(&ray).map(|h| h.prim), Some(7));
+        for (name, moved, out) in [("far", &far, 1), ("far and wide", &wide, 2)] {
+            let what = format!("{name}, {N} wide");
+            // Brute force over all the triangles hits the far one; the trees never do.
+            assert!(occluded_brute_force::<Watertight, _>(&moved[..], &beyond), "{what}");
+            let mut b = b2.clone();
+            b.refit(&moved[..]).unwrap();
+            assert!(b.intersect::<Watertight, _>(&moved[..], &beyond).is_none(), "{what}");
+            let mut one = tree.clone();
+            let mut two = tree.clone();
+            assert_eq!(one.refit(&moved[..]), out, "{what}");
+            assert_eq!(two.refit_par(&moved[..], 2), out, "{what}");
+            for t in [&one, &two] {
+                assert!(t.intersect::<Watertight>(&beyond).is_none(), "{what}");
+                assert!(!t.occluded::<Watertight>(&beyond), "{what}");
+                assert!(t.intersect::<Moller>(&beyond).is_none(), "{what}");
+                assert_eq!(t.intersect::<Watertight>(&ray).map(|h| h.prim), Some(8), "{what}");
+                // The root's box: the kept triangles' only.
+                let root = &t.nodes()[0].bounds;
+                let hi = (0..N).map(|l| root.max[0].lane(l)).fold(f32::NEG_INFINITY, f32::max);
+                let lo = (0..N).map(|l| root.min[0].lane(l)).fold(f32::INFINITY, f32::min);
+                assert_eq!((lo, hi), (0.0, 78.0), "{what}");
+                let mut seen = Vec::new();
+                check_boxes(t, &moved[..], 0, &mut seen);
+                assert_eq!(seen.len(), 40, "{what}");
+            }
+            assert!(identical(&one, &two), "{what}");
+            // Back in range: hit again, the tree of the start.
+            assert_eq!(one.refit(&near[..]), 0, "{what}");
+            assert!(identical(&one, &tree), "{what}");
+            assert_eq!(one.intersect::<Watertight>(&ray).map(|h| h.prim), Some(7), "{what}");
+        }
+    }
+    check::<f32x4, 4>();
+    check::<f32x8, 8>();
 }
 
 #[test]

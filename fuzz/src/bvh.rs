@@ -325,7 +325,12 @@ fn check_refit(case: &BvhCase, b2: &Bvh2, b8: &Bvh8) {
         return;
     }
     let moved: Vec<Triangle> = (0..tris.len()).map(|i| tris[(i + 1) % tris.len()]).collect();
-    let finite = |t: &Triangle| t.iter().all(|v| v.is_finite());
+    // The builders' rule, which the refit follows: finite vertices, and the box's extent and
+    // `min + max` finite (no coordinate beyond about +-1.7e38).
+    let finite = |t: &Triangle| {
+        let (lo, hi) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+        t.iter().all(|v| v.is_finite()) && (hi - lo).is_finite() && (hi + lo).is_finite()
+    };
     let mut kept_moved: Vec<Triangle> = vec![[Vec3::NAN; 3]; tris.len()];
     let mut want_out = 0;
     for &p in &b2.prim_indices {

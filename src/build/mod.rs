@@ -308,6 +308,7 @@ pub use params::{
     BinAxes, BuildParams, MAX_BINS, MAX_CLUSTER_SIZE, MAX_LEAF_SIZE, MIN_BINS, MIN_DEPTH, MortonBits, MortonCells,
     Refine, Strategy, TreeletParams,
 };
+pub(crate) use prims::usable_box;
 pub use prims::{MAX_PRIMITIVES, Primitives};
 pub use reinsert::{ReinsertParams, ReinsertStats};
 pub use rotate::RotationStats;

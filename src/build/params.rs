@@ -7,15 +7,16 @@ use crate::traverse::MAX_DEPTH;
 ///
 /// ```
 /// use strahl::build::{BuildParams, Bvh2, Strategy::*};
-/// let tris = strahl::scene::icosphere(3).to_soup();
-/// let cost = |strategy| {
+/// let tris = strahl::scene::icosphere(3).to_soup(); // 1,280 triangles
+/// for strategy in [Median, BinnedSah, SweepSah, Lbvh, Hlbvh, HlbvhSah, Ploc] {
 ///     let (bvh, _) = Bvh2::build(&tris[..], &BuildParams { strategy, ..BuildParams::default() }).unwrap();
-///     assert!(bvh.validate(&tris[..]).is_ok());
-///     bvh.sah_cost(1.0, 1.0)
-/// };
-/// let sweep = cost(SweepSah);
-/// for s in [Median, BinnedSah, Lbvh, Hlbvh, HlbvhSah, Ploc] {
-///     assert!(sweep <= cost(s)); // the full sweep is the reference
+///     let s = bvh.validate(&tris[..]).unwrap(); // every strategy: a valid tree of every triangle
+///     assert_eq!((s.primitives, s.nodes), (1280, 2 * s.leaves - 1));
+///     // The SAH cost of any valid tree (C_T = C_I = 1) lies between the root's share (1) and
+///     // every node counted in full. Which strategy gives the lowest is measured, not promised:
+///     // they are all greedy (see `BuildParams::quality` and `high`).
+///     let cost = bvh.sah_cost(1.0, 1.0);
+///     assert!(1.0 <= cost && cost <= (s.nodes - s.leaves + s.primitives) as f32, "{strategy:?}");
 /// }
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -478,9 +479,13 @@ impl BuildParams {
     /// assert_eq!(p.strategy, Strategy::SweepSah);
     /// assert!(p.check().is_ok());
     /// let tris = strahl::scene::thin_soup(5_000, 1);
-    /// let (best, _) = Bvh2::build(&tris[..], &p).unwrap();
-    /// let (binned, _) = Bvh2::build(&tris[..], &BuildParams::fast()).unwrap();
-    /// assert!(best.sah_cost(1.0, 1.0) <= binned.sah_cost(1.0, 1.0));
+    /// let (best, stats) = Bvh2::build(&tris[..], &p).unwrap();
+    /// let s = best.validate(&tris[..]).unwrap();
+    /// assert_eq!((s.primitives, s.leaves), (5_000, stats.leaves));
+    /// assert!(s.max_leaf_size <= p.max_leaf_size && s.max_depth <= p.max_depth);
+    /// // Usually below `fast()`'s binned tree's cost, but greedy top-down splits promise no order.
+    /// let cost = best.sah_cost(1.0, 1.0);
+    /// assert!(cost.is_finite() && cost >= 1.0);
     /// ```
     pub const fn quality() -> Self {
         Self {

@@ -76,13 +76,21 @@ impl Primitives for [Aabb] {
     }
 }
 
-/// Primitive `i`'s box if the builders accept it: present, not empty, all bounds finite, and
-/// extent and `min + max` finite (so areas of single boxes and centroids never overflow).
+/// Primitive `i`'s box if the builders accept it: present and [`usable_box`].
 #[inline]
 pub(crate) fn usable_bounds<P: Primitives + ?Sized>(prims: &P, i: usize) -> Option<Aabb> {
     let b = prims.prim_bounds(i)?;
-    let ok = b.min.cmple(b.max).all() && (b.max - b.min).is_finite() && (b.max + b.min).is_finite();
-    ok.then_some(b)
+    usable_box(b.min, b.max).then_some(b)
+}
+
+/// `true` if a primitive box from `min` to `max` is one the trees accept: not empty, and its
+/// extent `max - min` and doubled centre `min + max` finite (so its bounds are finite too, and
+/// areas of single boxes and centroids never overflow). A coordinate beyond about `±1.7e38`
+/// (`f32::MAX / 2`) fails it. The one rule of the builders ([`usable_bounds`]; `prim_ref` in four
+/// lanes), [`Bvh2::refit`](super::Bvh2::refit) and `BvhWide::refit`.
+#[inline(always)]
+pub(crate) fn usable_box(min: Vec3, max: Vec3) -> bool {
+    min.cmple(max).all() && (max - min).is_finite() && (max + min).is_finite()
 }
 
 /// Lane 3 of a [`PrimRef`] holds the primitive index's bits XOR this, so that it reads as a normal

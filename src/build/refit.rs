@@ -11,10 +11,15 @@ impl Bvh2 {
     /// (for animated geometry whose connectivity does not change; the SAH cost of the tree may
     /// degrade as primitives move).
     ///
-    /// Primitives that have become invalid (say, a NaN vertex) contribute nothing to their
-    /// leaf's box; a leaf left with no valid primitive gets the empty box, which rays never hit
-    /// and [`validate`](Self::validate) reports. Errors, without changing the tree, if the
-    /// structure is malformed (indices out of range, a node reached twice).
+    /// Primitives that have become invalid (say, a NaN vertex, or a coordinate beyond about
+    /// `±1.7e38`: see [`Primitives`]) contribute nothing to their leaf's box and stay in the
+    /// tree; a leaf left with no valid primitive gets the empty box ([`Aabb::EMPTY`]), which rays
+    /// never hit. [`validate`](Self::validate) then names the first of these it meets:
+    /// [`ValidateError::EmptyNode`] for a node with no valid primitive left below it (the
+    /// highest such node on its path from the root), [`ValidateError::InvalidPrimReferenced`]
+    /// for an invalid primitive in a leaf that still has a valid one. Rebuild to drop them.
+    /// Errors, without changing the tree, if the structure is malformed (indices out of range, a
+    /// node reached twice).
     ///
     /// ```
     /// use strahl::{Vec3, build::{Bvh2, BuildParams}};
@@ -28,6 +33,11 @@ impl Bvh2 {
     /// bvh.refit(&tris[..]).unwrap();
     /// assert_eq!(bvh.bounds().min.x, 10.0);
     /// assert!(bvh.validate(&tris[..]).is_ok());
+    /// // Every triangle NaN: refitted to nothing, and an empty tree by `validate`.
+    /// let nan = vec![[Vec3::NAN; 3]; 2];
+    /// bvh.refit(&nan[..]).unwrap();
+    /// assert_eq!(bvh.bounds(), strahl::Aabb::EMPTY);
+    /// assert_eq!(bvh.validate(&nan[..]), Err(strahl::build::ValidateError::EmptyNode { node: 0 }));
     /// ```
     pub fn refit<P: Primitives + ?Sized>(&mut self, prims: &P) -> Result<(), ValidateError> {
         // Pre-order from the root (explicit stack); a parent precedes its descendants, so the

@@ -67,12 +67,28 @@ pub enum ValidateError {
         /// The node.
         node: u32,
     },
-    /// A node's box has a NaN or infinite bound.
+    /// A node's box has a NaN bound, or an infinite bound where the box is not empty (the empty
+    /// box, [`Aabb::EMPTY`](crate::Aabb::EMPTY) with its infinite bounds included, is
+    /// [`EmptyNode`](Self::EmptyNode)).
     BoxNotFinite {
         /// The node.
         node: u32,
     },
-    /// A node's box is empty (`min > max` on some axis): a subtree without primitives.
+    /// A node's box is empty (`min > max` on some axis, no bound NaN): a subtree without
+    /// primitives. A tree [`Bvh2::refit`] left with a leaf whose every primitive has become
+    /// invalid (its box is [`Aabb::EMPTY`](crate::Aabb::EMPTY)) reports this for that leaf, or
+    /// for the highest node above it whose subtree has no valid primitive left.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3, build::{BuildParams, Bvh2, ValidateError}};
+    /// let mut tris = vec![[Vec3::ZERO, Vec3::X, Vec3::Y], [Vec3::Z, Vec3::ONE, Vec3::Y]];
+    /// let p = BuildParams { min_leaf_size: 1, max_leaf_size: 1, ..BuildParams::default() };
+    /// let (mut bvh, _) = Bvh2::build(&tris[..], &p).unwrap();
+    /// tris[1][0] = Vec3::NAN;
+    /// bvh.refit(&tris[..]).unwrap();
+    /// let leaf = bvh.nodes.iter().position(|n| n.is_leaf() && n.aabb() == Aabb::EMPTY).unwrap();
+    /// assert_eq!(bvh.validate(&tris[..]), Err(ValidateError::EmptyNode { node: leaf as u32 }));
+    /// ```
     EmptyNode {
         /// The node.
         node: u32,
@@ -205,11 +221,16 @@ impl Bvh2 {
             let node: &Node = &nodes[i as usize];
             stats.nodes += 1;
             let b = node.aabb();
-            if !(b.min.is_finite() && b.max.is_finite()) {
+            // NOTE: emptiness before finiteness: the empty box has infinite bounds, and an empty
+            // node (a leaf `refit` left without a valid primitive) is named as such.
+            if b.min.is_nan() || b.max.is_nan() {
                 return Err(ValidateError::BoxNotFinite { node: i });
             }
             if b.is_empty() {
                 return Err(ValidateError::EmptyNode { node: i });
+            }
+            if !(b.min.is_finite() && b.max.is_finite()) {
+                return Err(ValidateError::BoxNotFinite { node: i });
             }
             if node.is_leaf() {
                 stats.leaves += 1;

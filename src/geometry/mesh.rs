@@ -78,7 +78,13 @@ impl core::fmt::Display for GeometryError {
 
 impl core::error::Error for GeometryError {}
 
+/// `bytes` as a slice of `T`; an empty buffer is an empty slice wherever it points.
 fn cast<'a, T: bytemuck::Pod>(what: &'static str, bytes: &'a [u8]) -> Result<&'a [T], GeometryError> {
+    // NOTE: an empty `&[u8]` may point anywhere (`&[]` is a dangling pointer at address 1),
+    // which bytemuck reports as misaligned; there is nothing to read, so it is no error.
+    if bytes.is_empty() {
+        return Ok(&[]);
+    }
     bytemuck::try_cast_slice(bytes).map_err(|e| match e {
         PodCastError::TargetAlignmentGreaterAndInputNotAligned => GeometryError::Misaligned { what },
         _ => GeometryError::BadLength {
@@ -200,7 +206,9 @@ impl<'a> IndexedMesh<'a> {
     }
 
     /// Views byte buffers of packed `[f32; 3]` positions and `[u32; 3]` indices (native endian,
-    /// 4-byte aligned) without copying.
+    /// 4-byte aligned) without copying. An empty buffer is valid wherever it points: empty
+    /// indices give an empty mesh, and empty positions with indices give a mesh whose every
+    /// triangle is `None` (its vertices are missing), as [`new`](Self::new) with empty slices.
     ///
     /// ```
     /// use strahl::{Vec3, geometry::{GeometryError, IndexedMesh, Triangles}};
@@ -211,6 +219,8 @@ impl<'a> IndexedMesh<'a> {
     /// assert_eq!(mesh.triangle(0), Some(positions));
     /// let err = IndexedMesh::from_bytes(p, &i[..8]).unwrap_err(); // two indices, not a triangle
     /// assert_eq!(err, GeometryError::BadLength { what: "indices", len: 8, element: 12 });
+    /// let empty = IndexedMesh::from_bytes(&[], &[]).unwrap(); // say, an empty file
+    /// assert!(empty.is_empty());
     /// ```
     pub fn from_bytes(positions: &'a [u8], indices: &'a [u8]) -> Result<Self, GeometryError> {
         Ok(Self {
@@ -272,7 +282,8 @@ impl<'a> TriangleSoup<'a> {
         Self { triangles }
     }
 
-    /// Views a byte buffer of packed `[[f32; 3]; 3]` triangles without copying.
+    /// Views a byte buffer of packed `[[f32; 3]; 3]` triangles (native endian, 4-byte aligned)
+    /// without copying. An empty buffer, wherever it points, is an empty soup.
     ///
     /// ```
     /// use strahl::{Vec3, geometry::{GeometryError, TriangleSoup, Triangles}};
@@ -282,6 +293,7 @@ impl<'a> TriangleSoup<'a> {
     /// assert_eq!((soup.len(), soup.triangle(1)), (2, Some(tris[1])));
     /// let err = TriangleSoup::from_bytes(&bytes[4..]).unwrap_err(); // 68 bytes
     /// assert_eq!(err, GeometryError::BadLength { what: "triangles", len: 68, element: 36 });
+    /// assert!(TriangleSoup::from_bytes(&[]).unwrap().is_empty());
     /// ```
     pub fn from_bytes(bytes: &'a [u8]) -> Result<Self, GeometryError> {
         Ok(Self {
@@ -322,5 +334,39 @@ impl Triangles for [Triangle] {
             crate::math::prefetch(p);
             crate::math::prefetch(p.wrapping_add(core::mem::size_of::<Triangle>() - 1));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Empty buffers, whatever their address (`&[]` dangles at address 1; a sub-slice may sit at
+    /// any offset), are empty geometry; a buffer with bytes still needs 4-byte alignment.
+    #[test]
+    fn empty_buffers_are_empty_geometry() {
+        let words = [0u32; 20];
+        let bytes: &[u8] = bytemuck::cast_slice(&words);
+        for empty in [&[][..], &bytes[0..0], &bytes[1..1], &bytes[3..3], &bytes[80..]] {
+            let soup = TriangleSoup::from_bytes(empty).unwrap();
+            assert!(soup.is_empty());
+            assert_eq!(soup.triangle(0), None);
+            let mesh = IndexedMesh::from_bytes(empty, empty).unwrap();
+            assert!(mesh.is_empty() && mesh.positions.is_empty());
+            // Indices without positions: every triangle is missing a vertex.
+            let mesh = IndexedMesh::from_bytes(empty, &bytes[..12]).unwrap();
+            assert_eq!((mesh.len(), mesh.triangle(0)), (1, None));
+            // Positions without indices: no triangles.
+            let mesh = IndexedMesh::from_bytes(&bytes[..36], empty).unwrap();
+            assert_eq!((mesh.len(), mesh.positions.len()), (0, 3));
+        }
+        assert_eq!(
+            TriangleSoup::from_bytes(&bytes[1..37]).unwrap_err(),
+            GeometryError::Misaligned { what: "triangles" }
+        );
+        assert_eq!(
+            IndexedMesh::from_bytes(&bytes[2..14], &[]).unwrap_err(),
+            GeometryError::Misaligned { what: "positions" }
+        );
     }
 }

@@ -1,7 +1,8 @@
 //! [`BvhWide::refit`]: new boxes and packs for moved triangles, the same wide tree.
 
 use super::{BvhWide, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, WideNode, leaf_packs};
-use crate::geometry::{INVALID, Triangles, is_degenerate};
+use crate::build::usable_box;
+use crate::geometry::{INVALID, Triangle, Triangles, is_degenerate};
 use crate::intersect::TriangleLanes;
 use crate::math::Lane;
 #[cfg(feature = "std")]
@@ -21,11 +22,14 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// tree's shape, slot order and node numbering stay as they were, so its quality (SAH cost)
     /// may degrade as triangles move far; rebuild then.
     ///
-    /// A triangle of the tree whose vertices are no longer all finite, or that `tris` no longer
-    /// has (an index past its end, or an indexed mesh whose vertex index is out of range), is
-    /// **left out**: its lane is never hit and counts in no box; it comes back with a later refit
-    /// where it is valid again. Returns how many were left out. A degenerate (zero-area) but
-    /// finite triangle counts in its leaf's box and is never hit, as after `from_bvh2`.
+    /// A triangle of the tree that the builders would now leave out (see
+    /// [`Primitives`](crate::build::Primitives): a vertex that is not finite, or a coordinate so
+    /// large, beyond about `±1.7e38`, that its box's extent or `min + max` overflows), or that
+    /// `tris` no longer has (an index past its end, or an indexed mesh whose vertex index is out
+    /// of range), is **left out**: its lane is never hit and counts in no box; it comes back with
+    /// a later refit where it is valid again. Returns how many were left out. The rule is
+    /// [`Bvh2::refit`](crate::build::Bvh2::refit)'s and the builders'. A degenerate (zero-area)
+    /// but finite triangle counts in its leaf's box and is never hit, as after `from_bvh2`.
     /// Triangles that were invalid when the tree was built are not in it: rebuild to add them.
     ///
     /// Traversal after a refit gives exactly the closest hits of brute force over the tree's
@@ -164,8 +168,8 @@ fn refit_nodes<L: Lane, const N: usize>(nodes: &mut [WideNode<L, N>], boxes: &[(
     }
 }
 
-/// Fills `pack` again from `tris` (each lane's primitive), returning the box of its finite
-/// triangles and how many of its triangles were left out (not finite, or not in `tris`). The
+/// Fills `pack` again from `tris` (each lane's primitive), returning the box of its [`kept`]
+/// triangles and how many of its triangles were left out (not kept, or not in `tris`). The
 /// lanes are those [`TriangleLanes::pack`] makes of the same triangles (a left-out one as an
 /// unused lane: zero and not valid).
 // PERF: written lane by lane here rather than through `TriangleLanes::pack` (a triangle array
@@ -187,7 +191,7 @@ fn refill<L: Lane, const N: usize, P: Triangles + ?Sized>(
             continue;
         }
         match tris.triangle(p as usize) {
-            Some(tri) if tri.iter().all(|v| v.is_finite()) => {
+            Some(tri) if kept(&tri) => {
                 for (j, v) in tri.iter().enumerate() {
                     (lo, hi) = (lo.min(*v), hi.max(*v));
                     c[j][0][i & (MAX_LANES - 1)] = v.x;
@@ -208,6 +212,15 @@ fn refill<L: Lane, const N: usize, P: Triangles + ?Sized>(
     }
     pack.valid = valid;
     (lo, hi, out)
+}
+
+/// `true` if the refit keeps `tri` in the tree: its vertices finite and its box one the builders
+/// accept ([`usable_box`]), the rule of the builders and `Bvh2::refit` (a triangle's
+/// `Primitives::prim_bounds`, then `usable_bounds`).
+#[inline(always)]
+fn kept(tri: &Triangle) -> bool {
+    let [a, b, c] = *tri;
+    a.is_finite() && b.is_finite() && c.is_finite() && usable_box(a.min(b).min(c), a.max(b).max(c))
 }
 
 /// The union of a node's child boxes (empty slots hold the empty box).

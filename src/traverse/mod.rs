@@ -113,7 +113,8 @@ pub trait TriangleTest {
     /// ```
     const NAME: &'static str;
     /// `true` if the test reads [`PreparedRay::k`] and [`PreparedRay::shear`]; the traversals
-    /// skip computing them otherwise ([`PreparedRay::new_for`]). Defaults to `true`.
+    /// skip computing them otherwise, leaving them at [`PreparedRay::EMPTY`]'s values (every
+    /// other field as [`PreparedRay::new`] sets it). Defaults to `true`.
     ///
     /// ```
     /// use strahl::{Ray, Vec3, intersect::PreparedRay, traverse::{Moller, TriangleTest, Watertight}};

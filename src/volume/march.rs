@@ -196,7 +196,12 @@ impl MarchParams {
     }
 }
 
-/// Counters of one call of [`integrate_scalar`] / [`integrate_x8`].
+/// Counters of one call of a marcher that takes many rays: [`integrate_scalar`],
+/// [`integrate_x8`] and [`integrate`], and the pre-integrated ones,
+/// [`integrate_preintegrated_scalar`], [`integrate_preintegrated_x8`] and
+/// [`integrate_preintegrated`] (where `samples` counts the steps marched, each a look-up of the
+/// pre-integrated table for the scalars at its ends). The scalar and `x8` kernels of each kind
+/// count alike ([`integrate_ray`] marches one ray and returns no counters).
 ///
 /// ```
 /// # use strahl::{Ray, Vec3, volume::*};
@@ -213,6 +218,11 @@ impl MarchParams {
 /// assert_eq!(stats, MarchStats { rays: 1, samples: 4, ..MarchStats::default() });
 /// let cut = MarchParams { max_steps: 3, ..MarchParams::reference(0.25) };
 /// assert_eq!(integrate_scalar(&m, &rays, &mut out, &cut).unwrap().truncated, 1);
+/// // Pre-integrated: the same lattice, a table look-up per step.
+/// let pre = PreintegratedTable::build(m.transfer_function(), 0.25, 16).unwrap();
+/// let pm = PreintegratedMedium::new(*m.volume(), pre.view());
+/// let stats = integrate_preintegrated(&pm, &rays, &mut out, &MarchParams::reference(0.25)).unwrap();
+/// assert_eq!(stats, MarchStats { rays: 1, samples: 4, ..MarchStats::default() });
 /// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MarchStats {

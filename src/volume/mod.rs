@@ -242,6 +242,24 @@ pub enum VolumeError {
     InvalidRange,
     /// A transfer function without entries.
     EmptyTable,
+    /// A transfer function table longer than [`TransferFunction::MAX_ENTRIES`].
+    ///
+    /// ```
+    /// use strahl::volume::{TfEntry, TransferFunction, VolumeError};
+    /// let max = TransferFunction::MAX_ENTRIES;
+    /// // 256 MiB of zeros (calloc'd: the pages are never touched, the length is checked first).
+    /// let zeros = vec![0u32; 4 * (max + 1)];
+    /// let table: &[TfEntry] = bytemuck::cast_slice(&zeros);
+    /// let err = TransferFunction::new(table, 0.0, 1.0).unwrap_err();
+    /// assert_eq!(err, VolumeError::TableTooLong { len: max + 1, max });
+    /// assert_eq!(err.to_string(), "transfer function table has 16777217 entries, at most 16777216 allowed");
+    /// ```
+    TableTooLong {
+        /// Entries given.
+        len: usize,
+        /// The most a table may have ([`TransferFunction::MAX_ENTRIES`]).
+        max: usize,
+    },
     /// A transfer function entry with a colour channel that is NaN or beyond `±`[`COLOR_MAX`], or an
     /// extinction that is NaN, negative or above [`TAU_MAX`].
     InvalidEntry {
@@ -296,6 +314,9 @@ impl fmt::Display for VolumeError {
             Self::InvalidMaxSteps => write!(f, "max_steps must lie in 1..={MAX_STEPS_LIMIT}"),
             Self::InvalidRange => write!(f, "transfer function range must be finite with lo < hi"),
             Self::EmptyTable => write!(f, "transfer function table has no entries"),
+            Self::TableTooLong { len, max } => {
+                write!(f, "transfer function table has {len} entries, at most {max} allowed")
+            }
             Self::InvalidEntry { index } => write!(
                 f,
                 "transfer function entry {index}: colour must be in [-COLOR_MAX, COLOR_MAX], extinction in [0, TAU_MAX]"

@@ -214,7 +214,8 @@ pub struct TransferFunction<'a> {
 }
 
 impl<'a> TransferFunction<'a> {
-    /// Most entries a table may have (`2^24`, so that entry indices are exact in `f32`).
+    /// Most entries a table may have (`2^24`, so that entry indices are exact in `f32`); a
+    /// longer one is [`VolumeError::TableTooLong`].
     ///
     /// ```
     /// use strahl::volume::{TransferFunction, VolumeError};
@@ -227,10 +228,10 @@ impl<'a> TransferFunction<'a> {
 
     /// A transfer function over `entries` for scalar values in `[lo, hi]`.
     ///
-    /// Errors: [`VolumeError::EmptyTable`] for no entries (or more than
-    /// [`MAX_ENTRIES`](Self::MAX_ENTRIES)), [`VolumeError::InvalidRange`] unless `lo < hi` are
-    /// finite, [`VolumeError::InvalidEntry`] for a colour channel that is NaN or beyond
-    /// `±`[`COLOR_MAX`], or an extinction that is NaN, negative or above [`TAU_MAX`].
+    /// Errors: [`VolumeError::EmptyTable`] for no entries, [`VolumeError::TableTooLong`] for
+    /// more than [`MAX_ENTRIES`](Self::MAX_ENTRIES), [`VolumeError::InvalidRange`] unless
+    /// `lo < hi` are finite, [`VolumeError::InvalidEntry`] for a colour channel that is NaN or
+    /// beyond `±`[`COLOR_MAX`], or an extinction that is NaN, negative or above [`TAU_MAX`].
     ///
     /// ```
     /// use strahl::volume::{TfEntry, TransferFunction, VolumeError};
@@ -242,8 +243,14 @@ impl<'a> TransferFunction<'a> {
     /// assert_eq!(TransferFunction::new(&bad, 0.0, 1.0).unwrap_err(), VolumeError::InvalidEntry { index: 1 });
     /// ```
     pub fn new(entries: &'a [TfEntry], lo: f32, hi: f32) -> Result<Self, VolumeError> {
-        if entries.is_empty() || entries.len() > Self::MAX_ENTRIES {
+        if entries.is_empty() {
             return Err(VolumeError::EmptyTable);
+        }
+        if entries.len() > Self::MAX_ENTRIES {
+            return Err(VolumeError::TableTooLong {
+                len: entries.len(),
+                max: Self::MAX_ENTRIES,
+            });
         }
         if !(lo.is_finite() && hi.is_finite() && lo < hi && (hi - lo).is_finite()) {
             return Err(VolumeError::InvalidRange);
@@ -518,6 +525,17 @@ mod tests {
             TransferFunction::new(&[], 0.0, 1.0).unwrap_err(),
             VolumeError::EmptyTable
         );
+        // Too long: its own error, found before any entry is read (the zeros are calloc'd pages,
+        // 256 MiB never touched); the longest table is accepted.
+        let max = TransferFunction::MAX_ENTRIES;
+        let zeros = alloc::vec![0u32; 4 * (max + 1)];
+        let long: &[TfEntry] = bytemuck::cast_slice(&zeros);
+        assert_eq!(
+            TransferFunction::new(long, 0.0, 1.0).unwrap_err(),
+            VolumeError::TableTooLong { len: max + 1, max }
+        );
+        let tf = TransferFunction::new(&long[..max], 0.0, 1.0).unwrap();
+        assert_eq!(tf.entries().len(), max);
         for (lo, hi) in [
             (1.0, 1.0),
             (2.0, 1.0),

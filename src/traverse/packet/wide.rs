@@ -282,7 +282,7 @@ fn to_singles(rays: &[Ray], switch: u32) -> bool {
 }
 
 /// Prepares up to `K` rays into `single` (its lanes past `rays` are left as they are), with the
-/// watertight fields where `watertight` ([`PreparedRay::new_for`]).
+/// watertight fields where `watertight` (`PreparedRay::new_for`, hidden from the docs).
 #[inline(always)]
 pub(super) fn prepare_into<const K: usize>(rays: &[Ray], single: &mut [PreparedRay; K], watertight: bool) {
     for (s, r) in single.iter_mut().zip(rays) {
