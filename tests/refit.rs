@@ -347,6 +347,19 @@ fn refit_leaves_out_triangles_beyond_the_range() {
                 assert_eq!(seen.len(), 40, "{what}");
             }
             assert!(identical(&one, &two), "{what}");
+            // A collapse of the refit binary tree over the moved triangles keeps to the same
+            // rule (its shape may differ: the collapse chooses by the new boxes).
+            let collapsed = BvhWide::<L, N>::from_bvh2(&b, &moved[..]).unwrap();
+            assert!(collapsed.intersect::<Watertight>(&beyond).is_none(), "{what}");
+            assert!(!collapsed.occluded::<Moller>(&beyond), "{what}");
+            assert_eq!(
+                collapsed.intersect::<Watertight>(&ray).map(|h| h.prim),
+                Some(8),
+                "{what}"
+            );
+            let mut seen = Vec::new();
+            check_boxes(&collapsed, &moved[..], 0, &mut seen);
+            assert_eq!(seen.len(), 40, "{what}");
             // Back in range: hit again, the tree of the start.
             assert_eq!(one.refit(&near[..]), 0, "{what}");
             assert!(identical(&one, &tree), "{what}");

@@ -17,7 +17,7 @@
 //! only where it hits at an equal `t`, `+0` and `-0` included); any-hit answers agree.
 
 use crate::decode::{Input, Mode};
-use strahl::build::{BuildParams, Bvh2, MortonBits, MortonCells, Refine, Strategy, TreeletParams};
+use strahl::build::{BuildParams, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy, TreeletParams};
 use strahl::geometry::{Hit, Triangle};
 use strahl::intersect::{PreparedRay, watertight};
 use strahl::layout::{Bvh4, Bvh8};
@@ -97,6 +97,10 @@ pub fn builders() -> Vec<BuildParams> {
         BuildParams::hybrid_sah(),
         BuildParams {
             refine: Refine::Rotations(2),
+            ..BuildParams::fastest()
+        },
+        BuildParams {
+            refine: Refine::Reinsertion(ReinsertParams::new()),
             ..BuildParams::fastest()
         },
         BuildParams {

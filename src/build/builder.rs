@@ -181,7 +181,7 @@ impl Builder {
     /// [`Strategy::HlbvhSah`]: with 30-bit codes, the Morton codes, the top-digit scatter and the
     /// bucket sorts in chunks side by side; the SAH mini-trees side by side), and the first
     /// round of rotations ([`Refine::Rotations`]: subtrees side by side, then the nodes above
-    /// them). The other strategies, and treelet refinement, run on the calling thread. Up to
+    /// them). The other strategies, treelet refinement and reinsertion run on the calling thread. Up to
     /// 8,192 (valid) primitives the build is single-threaded; `threads` is taken as at least 1 and
     /// at most [`MAX_THREADS`].
     /// The primitives are read from several threads, so they must be `Sync`.

@@ -267,6 +267,20 @@
 //! soup, terrain and sphereflake); it now runs in index order where children follow their
 //! parents, as the top-down builders lay them out (47-50, 18-20 and 21-23 ms; the same trees).
 //!
+//! **Reinsertion** ([`Refine::Reinsertion`], 2026-12-05, Intel Xeon; `STRAHL_BENCH_SCENES=soup1M,sphereflake1M
+//! cargo bench --features embree --bench build -- --noplot`, member `binned64-all+reinsertion`:
+//! [`BuildParams::high`] with reinsertion in place of its rotation round, two rounds over every
+//! node). SAH cost, 1M soup: 449.65 against 465.05 (`high()`), 465.96 (full sweep) and 472.37
+//! (Embree medium), at 0.30 Mtri/s warm (3.6 s); 1M sphereflake: 48.06 against 49.71, 50.98 and
+//! 51.41 (1.9 s). The lowest SAH cost of any builder in the run, strahl's or a peer's (`obvhs`'s
+//! PLOC with reinsertion: 605.6 and 54.95 with its larger leaves). What it does not buy here:
+//! trace speed. Collapsed to BVH8 and traced taking turns (1M sphereflake, best of 5; 1024 x 1024
+//! primary, 262k diffuse and 262k shadow rays), the reinserted `balanced()` tree (SAH 48.53)
+//! took 55.8 / 228.1 / 113.7 ms against 55.3 / 223.8 / 110.1 for `balanced()` itself (52.02)
+//! and 55.6 / 224.5 / 114.0 for the full sweep's: within the noise, as for the full sweep's
+//! lower cost before it. Candidates are taken in slot order (the depth-first layout keeps a
+//! subtree's nodes close in memory): 1.5x faster than in the order of their scores, trees as good.
+//!
 //! Tried the same day for `hybrid_sah()`'s "within 3% of `quality()` at 5 times its speed" on the
 //! structured scenes, none of which reaches it (SAH cost above `quality()`'s; ms from probes
 //! next to `quality()`'s 700-1050 ms):

@@ -147,15 +147,21 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
         let mut bounds = Aabb::EMPTY;
         let mut tris: [Triangle; 8] = [[crate::Vec3::ZERO; 3]; 8];
         for chunk in prims.chunks(N) {
-            for (t, &p) in tris.iter_mut().zip(chunk) {
+            let mut kept = 0u32;
+            for (i, (t, &p)) in tris.iter_mut().zip(chunk).enumerate() {
                 *t = self.tris.triangle(p as usize).ok_or(CollapseError::Malformed)?;
-                if t.iter().all(|v| v.is_finite()) {
+                // The builders' rule (as `refit`'s): non-finite triangles, and those beyond the
+                // range a box can hold, are in no box and never hit.
+                if super::refit::kept(t) {
+                    kept |= 1 << i;
                     for v in t.iter() {
                         bounds.grow(*v);
                     }
                 }
             }
-            self.push_pack(TriangleLanes::pack(&tris[..chunk.len()], chunk))?;
+            let mut pack = TriangleLanes::pack(&tris[..chunk.len()], chunk);
+            pack.valid &= kept;
+            self.push_pack(pack)?;
         }
         let count = self.pack_count() - first;
         Ok((LEAF_BIT | (first as u32) << 4 | (count as u32 - 1), bounds))

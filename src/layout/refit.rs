@@ -218,7 +218,7 @@ fn refill<L: Lane, const N: usize, P: Triangles + ?Sized>(
 /// accept ([`usable_box`]), the rule of the builders and `Bvh2::refit` (a triangle's
 /// `Primitives::prim_bounds`, then `usable_bounds`).
 #[inline(always)]
-fn kept(tri: &Triangle) -> bool {
+pub(super) fn kept(tri: &Triangle) -> bool {
     let [a, b, c] = *tri;
     a.is_finite() && b.is_finite() && c.is_finite() && usable_box(a.min(b).min(c), a.max(b).max(c))
 }
