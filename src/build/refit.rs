@@ -1,10 +1,9 @@
 //! [`Bvh2::refit`] (new boxes for moved primitives, same topology) and [`Bvh2::sah_cost`].
 
 use super::prims::{Primitives, usable_bounds};
+use super::validate::{Walk, checked_pre_order};
 use super::{Bvh2, ValidateError};
 use crate::geometry::Aabb;
-use alloc::vec;
-use alloc::vec::Vec;
 
 impl Bvh2 {
     /// Recomputes every node's box from the primitives' current boxes, keeping the topology
@@ -40,40 +39,11 @@ impl Bvh2 {
     /// assert_eq!(bvh.validate(&nan[..]), Err(strahl::build::ValidateError::EmptyNode { node: 0 }));
     /// ```
     pub fn refit<P: Primitives + ?Sized>(&mut self, prims: &P) -> Result<(), ValidateError> {
-        // Pre-order from the root (explicit stack); a parent precedes its descendants, so the
-        // reverse order visits children first.
-        let n = self.nodes.len();
-        let mut order: Vec<u32> = Vec::with_capacity(n);
-        let mut seen = vec![false; n];
-        let mut stack: Vec<u32> = Vec::new();
-        if n > 0 {
-            stack.push(0);
-            seen[0] = true;
-        }
-        while let Some(i) = stack.pop() {
-            order.push(i);
-            let node = self.nodes[i as usize];
-            if node.is_leaf() {
-                if node.prim_range().end > self.prim_indices.len() {
-                    return Err(ValidateError::SlotsOutOfRange {
-                        node: i,
-                        first: node.index,
-                        count: node.count,
-                    });
-                }
-            } else {
-                let l = node.left();
-                if l as usize >= n.saturating_sub(1) {
-                    return Err(ValidateError::ChildOutOfRange { node: i, child: l });
-                }
-                for c in [l, l + 1] {
-                    if core::mem::replace(&mut seen[c as usize], true) {
-                        return Err(ValidateError::NodeReachedTwice { node: c });
-                    }
-                    stack.push(c);
-                }
-            }
-        }
+        // A parent precedes its descendants in pre-order, so the reverse order visits children
+        // first.
+        let mut walk = Walk::default();
+        checked_pre_order(&self.nodes, self.prim_indices.len(), &mut walk, |_, _| {})?;
+        let order = walk.order;
         for &i in order.iter().rev() {
             let node = self.nodes[i as usize];
             let b = if node.is_leaf() {

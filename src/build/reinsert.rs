@@ -23,6 +23,7 @@
 //! Measured in the [module docs](super#measured).
 
 use super::prims::Box8;
+use super::validate::{Walk, checked_pre_order};
 use super::{Bvh2, Node, ValidateError};
 use alloc::collections::BinaryHeap;
 use alloc::vec::Vec;
@@ -97,7 +98,7 @@ pub struct ReinsertStats {
 pub(crate) struct ReinsertScratch {
     parent: Vec<u32>,
     height: Vec<u32>,
-    reach: Vec<bool>,
+    walk: Walk,
     cand: Vec<u64>,
     heap: BinaryHeap<Reverse<(u32, u32, u32)>>,
     stack: Vec<(u32, u32)>,
@@ -127,7 +128,7 @@ pub(crate) fn optimize(
     }
     scan(bvh, s)?;
     let n = bvh.nodes.len();
-    let reachable = s.reach.iter().filter(|&&r| r).count();
+    let reachable = s.walk.order.len();
     let take = (reachable * rp.per_mille.clamp(1, 1000) as usize / 1000).max(1);
     for _ in 0..rp.rounds.clamp(1, 64) {
         if reachable < 5 {
@@ -138,7 +139,7 @@ pub(crate) fn optimize(
         // Score every node but the root by how much it enlarges its parent.
         s.cand.clear();
         for c in 1..n {
-            if !s.reach[c] {
+            if !s.walk.reached(c) {
                 continue;
             }
             let p = s.parent[c] as usize;
@@ -180,55 +181,31 @@ pub(crate) fn optimize(
     Ok(stats)
 }
 
-/// Checks the tree reachable from the root (children and slot ranges in range, no node reached
-/// twice, every box finite and not empty) and fills `s.parent`, `s.height` and `s.reach`.
+/// Checks the tree reachable from the root ([`checked_pre_order`]: children and slot ranges in
+/// range, no node reached twice; then every reachable box finite and not empty) and fills
+/// `s.parent`, `s.height` and `s.walk` (the reachable nodes).
 fn scan(bvh: &Bvh2, s: &mut ReinsertScratch) -> Result<(), ValidateError> {
-    let (nodes, slots) = (&bvh.nodes, bvh.prim_indices.len());
+    let nodes = &bvh.nodes;
     let n = nodes.len();
     s.parent.clear();
     s.parent.resize(n, 0);
     s.height.clear();
     s.height.resize(n, 1);
-    s.reach.clear();
-    s.reach.resize(n, false);
-    s.stack.clear();
-    // Pre-order in `s.cand` (reused), heights filled in reverse.
-    s.cand.clear();
-    s.stack.push((0, 0));
-    s.reach[0] = true;
-    while let Some((i, _)) = s.stack.pop() {
-        s.cand.push(i as u64);
-        let node = &nodes[i as usize];
-        let b = node.aabb();
+    let parent = &mut s.parent;
+    checked_pre_order(nodes, bvh.prim_indices.len(), &mut s.walk, |p, c| {
+        parent[c as usize] = p
+    })?;
+    for &i in &s.walk.order {
+        let b = nodes[i as usize].aabb();
         if !(b.min.is_finite() && b.max.is_finite()) {
             return Err(ValidateError::BoxNotFinite { node: i });
         }
         if b.min.cmpgt(b.max).any() {
             return Err(ValidateError::EmptyNode { node: i });
         }
-        if node.is_leaf() {
-            if node.prim_range().end > slots {
-                return Err(ValidateError::SlotsOutOfRange {
-                    node: i,
-                    first: node.index,
-                    count: node.count,
-                });
-            }
-            continue;
-        }
-        let l = node.left();
-        if l as usize >= n.saturating_sub(1) {
-            return Err(ValidateError::ChildOutOfRange { node: i, child: l });
-        }
-        for c in [l, l + 1] {
-            if core::mem::replace(&mut s.reach[c as usize], true) {
-                return Err(ValidateError::NodeReachedTwice { node: c });
-            }
-            s.parent[c as usize] = i;
-            s.stack.push((c, 0));
-        }
     }
-    for &i in s.cand.iter().rev() {
+    // Heights bottom-up: reverse pre-order visits children before parents.
+    for &i in s.walk.order.iter().rev() {
         let node = &nodes[i as usize];
         if !node.is_leaf() {
             let l = node.left() as usize;

@@ -24,6 +24,7 @@
 //! bound (a rotation is skipped where the deepest leaf below `N` would pass it).
 
 use super::prims::Box8;
+use super::validate::{Walk, checked_pre_order};
 use super::{Bvh2, Node, ValidateError};
 use alloc::vec;
 use alloc::vec::Vec;
@@ -475,31 +476,21 @@ fn index_order(bvh: &Bvh2, order: &mut Vec<u32>, depth: &mut [u32]) -> bool {
     true
 }
 
-/// Interior and leaf nodes in pre-order from the root, with their depths (root = 1); errors on
-/// child indices out of range (or pointing at the root) and on a node reached twice.
+/// Interior and leaf nodes in pre-order from the root, with their depths (root = 1), by
+/// [`checked_pre_order`] (which names what is malformed).
 fn pre_order(bvh: &Bvh2, order: &mut Vec<u32>, depth: &mut [u32]) -> Result<(), ValidateError> {
-    let n = bvh.nodes.len();
-    order.clear();
-    // Depth 0: not reached yet.
+    let mut walk = Walk::default();
+    walk.order = core::mem::take(order);
+    // 0: not reached.
     depth.fill(0);
-    let mut stack = vec![(0u32, 1u32)];
-    while let Some((i, d)) = stack.pop() {
-        if core::mem::replace(&mut depth[i as usize], d) != 0 {
-            return Err(ValidateError::NodeReachedTwice { node: i });
-        }
-        order.push(i);
-        let node = bvh.nodes[i as usize];
-        if !node.is_leaf() {
-            let l = node.left();
-            // `>= n - 1`, not `+ 1 >= n`: no overflow where `usize` is 32 bits.
-            if l as usize >= n - 1 || l == 0 {
-                return Err(ValidateError::ChildOutOfRange { node: i, child: l });
-            }
-            stack.push((l + 1, d + 1));
-            stack.push((l, d + 1));
-        }
+    if let Some(d) = depth.first_mut() {
+        *d = 1;
     }
-    Ok(())
+    let r = checked_pre_order(&bvh.nodes, bvh.prim_indices.len(), &mut walk, |p, c| {
+        depth[c as usize] = depth[p as usize] + 1;
+    });
+    *order = walk.order;
+    r
 }
 
 impl Bvh2 {

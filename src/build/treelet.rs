@@ -36,6 +36,7 @@
 //! and the pass is single-threaded: see [`TreeletParams`] for the cost and the knobs.
 
 use super::prims::Box8;
+use super::validate::{Walk, checked_pre_order};
 use super::{Bvh2, Node, TreeletParams, ValidateError};
 use alloc::vec::Vec;
 
@@ -55,10 +56,8 @@ pub(crate) struct NodeInfo {
 /// The pass's working memory, kept in a [`Builder`](super::Builder).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct TreeletScratch {
-    order: Vec<u32>,
+    walk: Walk,
     info: Vec<NodeInfo>,
-    seen: Vec<bool>,
-    stack: Vec<u32>,
 }
 
 /// What [`Bvh2::optimize_treelets`] did.
@@ -109,16 +108,18 @@ pub(crate) fn optimize(
     // The documented range (`1 ..= 16`) holds here too: this is also reached without
     // `BuildParams::check`, through `Bvh2::optimize_treelets`.
     let mut before = u32::MAX;
-    for round in 0..tp.rounds.clamp(1, 16) {
+    for _ in 0..tp.rounds.clamp(1, 16) {
         if stats.restructured == before {
             // The last round changed nothing, so another would find the same tree.
             break;
         }
         before = stats.restructured;
-        pre_order(&bvh.nodes, bvh.prim_indices.len(), s, round == 0)?;
+        // NOTE: checked every round, not only the first: one linear walk beside a round of
+        // treelet searches.
+        pre_order(&bvh.nodes, bvh.prim_indices.len(), s)?;
         let nodes = &mut bvh.nodes;
-        let TreeletScratch { order, info, .. } = s;
-        for &r in order.iter().rev() {
+        let TreeletScratch { walk, info } = s;
+        for &r in walk.order.iter().rev() {
             let node = nodes[r as usize];
             if node.is_leaf() {
                 info[r as usize].prims = node.count;
@@ -145,62 +146,20 @@ pub(crate) fn optimize(
     Ok(stats)
 }
 
-/// Pre-order from the root into `s.order`, with each node's depth; with `check`, also that every
-/// child pair and slot range is in range and no node is reached twice (the tree may come from
-/// anywhere), erroring as [`Bvh2::refit`] does.
-fn pre_order(nodes: &[Node], slots: usize, s: &mut TreeletScratch, check: bool) -> Result<(), ValidateError> {
-    let n = nodes.len();
-    let TreeletScratch {
-        order,
-        info,
-        seen,
-        stack,
-    } = s;
-    order.clear();
-    stack.clear();
+/// Pre-order from the root into `s.walk.order` ([`checked_pre_order`]: the tree may come from
+/// anywhere), with each node's depth in `s.info`.
+fn pre_order(nodes: &[Node], slots: usize, s: &mut TreeletScratch) -> Result<(), ValidateError> {
+    let TreeletScratch { walk, info } = s;
     // NOTE: resized only when the length changes; every reachable entry is written before use.
-    if info.len() != n {
-        info.resize(n, NodeInfo::default());
+    if info.len() != nodes.len() {
+        info.resize(nodes.len(), NodeInfo::default());
     }
-    if check {
-        seen.clear();
-        seen.resize(n, false);
+    if let Some(root) = info.first_mut() {
+        root.depth = 1;
     }
-    if n == 0 {
-        return Ok(());
-    }
-    stack.push(0);
-    info[0].depth = 1;
-    if check {
-        seen[0] = true;
-    }
-    while let Some(i) = stack.pop() {
-        order.push(i);
-        let node = &nodes[i as usize];
-        if node.is_leaf() {
-            if check && node.prim_range().end > slots {
-                return Err(ValidateError::SlotsOutOfRange {
-                    node: i,
-                    first: node.index,
-                    count: node.count,
-                });
-            }
-            continue;
-        }
-        let l = node.left();
-        if check && l as usize >= n.saturating_sub(1) {
-            return Err(ValidateError::ChildOutOfRange { node: i, child: l });
-        }
-        let d = info[i as usize].depth.saturating_add(1);
-        for c in [l, l + 1] {
-            if check && core::mem::replace(&mut seen[c as usize], true) {
-                return Err(ValidateError::NodeReachedTwice { node: c });
-            }
-            info[c as usize].depth = d;
-            stack.push(c);
-        }
-    }
-    Ok(())
+    checked_pre_order(nodes, slots, walk, |p, c| {
+        info[c as usize].depth = info[p as usize].depth.saturating_add(1);
+    })
 }
 
 /// Forms the treelet at interior node `r`, finds its best topology and writes it if it is

@@ -6,6 +6,78 @@ use super::{Bvh2, Node};
 use alloc::vec;
 use alloc::vec::Vec;
 
+/// Reusable buffers of [`checked_pre_order`]: the order it writes, and its scratch.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Walk {
+    /// The reachable nodes in pre-order (a parent before its children, left before right).
+    pub order: Vec<u32>,
+    seen: Vec<bool>,
+    stack: Vec<u32>,
+}
+
+impl Walk {
+    /// Whether node `i` was reached by the last walk (`false` past the tree's end).
+    #[inline]
+    pub fn reached(&self, i: usize) -> bool {
+        self.seen.get(i).copied().unwrap_or(false)
+    }
+}
+
+/// The nodes reachable from the root of `nodes`, in pre-order, into `w.order` (explicit stack:
+/// no recursion, so no depth can overflow it), checking what a pass over a tree that may come
+/// from anywhere needs before it indexes with the tree's links: every interior node's child pair
+/// in range, every leaf's slot range within `slots`, no node reached twice (which also rules out
+/// cycles). `child(parent, child)` is called for each child as it is reached, parents first
+/// (depths, parent links). The first break found is returned (`w.order` then holds a prefix).
+/// Boxes are not looked at; [`Bvh2::validate`] checks everything, this only the links.
+pub(crate) fn checked_pre_order(
+    nodes: &[Node],
+    slots: usize,
+    w: &mut Walk,
+    mut child: impl FnMut(u32, u32),
+) -> Result<(), ValidateError> {
+    let n = nodes.len();
+    let Walk { order, seen, stack } = w;
+    order.clear();
+    stack.clear();
+    seen.clear();
+    seen.resize(n, false);
+    if n == 0 {
+        return Ok(());
+    }
+    stack.push(0);
+    seen[0] = true;
+    while let Some(i) = stack.pop() {
+        order.push(i);
+        let node = &nodes[i as usize];
+        if node.is_leaf() {
+            if node.prim_range().end > slots {
+                return Err(ValidateError::SlotsOutOfRange {
+                    node: i,
+                    first: node.index,
+                    count: node.count,
+                });
+            }
+            continue;
+        }
+        let l = node.left();
+        // `>= n - 1`, not `+ 1 >= n`: no overflow where `usize` is 32 bits.
+        if l as usize >= n - 1 {
+            return Err(ValidateError::ChildOutOfRange { node: i, child: l });
+        }
+        for c in [l, l + 1] {
+            if core::mem::replace(&mut seen[c as usize], true) {
+                return Err(ValidateError::NodeReachedTwice { node: c });
+            }
+            child(i, c);
+        }
+        // Right pushed first, so the left child is popped (and ordered) first.
+        stack.push(l + 1);
+        stack.push(l);
+    }
+    Ok(())
+}
+
 /// Shape statistics of a valid tree, from [`Bvh2::validate`].
 ///
 /// ```
