@@ -83,4 +83,12 @@ pub mod traverse;
 pub mod volume;
 
 pub use geometry::{Aabb, Hit, Ray};
+/// The `glam` strahl is built on (its `Vec3`, and `Affine3A` in [`layout::Instance`]), so that
+/// callers name the same version.
+///
+/// ```
+/// let m = strahl::glam::Affine3A::from_translation(strahl::Vec3::X);
+/// assert_eq!(m.transform_point3(strahl::Vec3::ZERO), strahl::Vec3::X);
+/// ```
+pub use glam;
 pub use glam::Vec3;

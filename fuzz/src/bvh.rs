@@ -314,6 +314,101 @@ pub fn check_bvh(case: &BvhCase) {
         }
         if params == builders()[0] {
             check_refit(case, &b2, &b8);
+            check_tlas(case, &kept, &b8, scene_tame);
+        }
+    }
+}
+
+/// `Tlas` over three instances of the tree whose transforms are exact in floating point (the
+/// identity; axes permuted and scaled by 2; x mirrored and scaled by 1/2), so that the
+/// object-space rays are the world rays' exact images, and two bad ones (a NaN translation, a
+/// BLAS index out of range): the bad ones left out; every ray traced without panicking, with
+/// finite hits; on tame inputs, closest hits equal to the closest of one BVH8 trace per instance
+/// (the same `t`, or a tie, or a near tie whose hit is real, as [`agrees`] allows), any hits
+/// agreeing with them.
+fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
+    use strahl::glam::{Affine3A, Mat3};
+    use strahl::layout::{Instance, Tlas};
+    let good = [
+        Affine3A::IDENTITY,
+        Affine3A::from_mat3(Mat3::from_cols(
+            Vec3::new(0.0, 2.0, 0.0),
+            Vec3::new(0.0, 0.0, 2.0),
+            Vec3::new(2.0, 0.0, 0.0),
+        )),
+        Affine3A::from_scale(Vec3::new(-0.5, 0.5, 0.5)),
+    ];
+    let mut inst: Vec<Instance> = good.iter().map(|&m| Instance::new(m, 0)).collect();
+    inst.push(Instance::new(Affine3A::from_translation(Vec3::NAN), 0));
+    inst.push(Instance::new(Affine3A::IDENTITY, 1));
+    let blases = core::slice::from_ref(b8);
+    let tlas = Tlas::build(&inst, blases).expect("five instances build");
+    // The good ones are left out too where the tree is empty, or where their world box
+    // overflows (a scene reaching near `f32::MAX`); never on a tame scene.
+    let left_out = tlas.left_out() as usize;
+    if b8.is_empty() {
+        assert_eq!(left_out, 5, "tlas left_out");
+    } else if scene_tame {
+        assert_eq!(left_out, 2, "tlas left_out");
+    } else {
+        assert!(left_out >= 2, "tlas left_out {left_out}");
+    }
+    let local = |m: &Affine3A, ray: &Ray| {
+        let inv = m.inverse();
+        Ray {
+            origin: inv.transform_point3(ray.origin),
+            tmin: ray.tmin,
+            direction: inv.transform_vector3(ray.direction),
+            tmax: ray.tmax,
+        }
+    };
+    for (i, ray) in case.rays.iter().enumerate() {
+        let got = tlas.intersect::<Watertight, _, 8>(blases, ray);
+        let occ = tlas.occluded::<Watertight, _, 8>(blases, ray);
+        if let Some(g) = got {
+            assert!(
+                g.hit.t.is_finite() && g.hit.u.is_finite() && g.hit.v.is_finite(),
+                "tlas ray {i}: {g:?}"
+            );
+            assert!(g.instance < 3, "tlas ray {i}: a bad instance hit: {g:?}");
+        }
+        let tame = |v: Vec3| {
+            v.to_array()
+                .iter()
+                .all(|x| *x == 0.0 || (TAME_MIN..=TAME * 0.25).contains(&x.abs()))
+        };
+        if !(scene_tame && (case.mode == Mode::Grid || (tame(ray.origin) && tame(ray.direction)))) {
+            continue;
+        }
+        // One trace per instance; the smallest t (ties: the first instance).
+        let want = good
+            .iter()
+            .enumerate()
+            .filter_map(|(k, m)| b8.intersect::<Watertight>(&local(m, ray)).map(|h| (k, h)))
+            .fold(None::<(usize, Hit)>, |b, (k, h)| match b {
+                Some((_, bh)) if bh.t <= h.t => b,
+                _ => Some((k, h)),
+            });
+        assert_eq!(occ, want.is_some(), "tlas ray {i}: occluded {occ}, traces {want:?}");
+        match (got, want) {
+            (None, None) => {}
+            (Some(g), Some((k, w))) => {
+                if (g.instance as usize, g.hit.prim) == (k, w.prim) {
+                    assert_eq!(g.hit.t.to_bits(), w.t.to_bits(), "tlas ray {i}: {g:?} against {w:?}");
+                } else {
+                    // A tie or a near tie: the hit must be real in its instance.
+                    assert!(
+                        g.hit.t == w.t || near_tie(ray, g.hit, w),
+                        "tlas ray {i}: {g:?} against {k} {w:?}"
+                    );
+                    let lr = local(&good[g.instance as usize], ray);
+                    let alone = kept
+                        .get(g.hit.prim as usize)
+                        .and_then(|t| watertight::intersect_scalar(&PreparedRay::new(&lr), t, g.hit.prim));
+                    assert_eq!(alone, Some(g.hit), "tlas ray {i}: not a hit of its instance");
+                }
+            }
+            _ => panic!("tlas ray {i}: {got:?} against {want:?}"),
         }
     }
 }

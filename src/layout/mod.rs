@@ -24,6 +24,11 @@
 //! its packs and boxes again from moved triangles: for animated meshes, about 16x faster than a
 //! rebuild on 1M triangles, at no cost in trace time for small motion (README, "Refitting
 //! animated geometry").
+//!
+//! # Instances
+//! [`Tlas`] is the top level of a two-level BVH: [`Instance`]s place wide trees (BLASes) in the
+//! world by affine transforms; rays are traced into each instance's object space (see
+//! [`Tlas`]'s module, `instance.rs`).
 
 //! # Layout
 //! ```text
@@ -39,6 +44,8 @@
 #[cfg(feature = "alloc")]
 mod collapse;
 #[cfg(feature = "alloc")]
+mod instance;
+#[cfg(feature = "alloc")]
 #[cfg(feature = "std")]
 mod pages;
 #[cfg(feature = "alloc")]
@@ -51,6 +58,8 @@ use alloc::vec::Vec;
 
 #[cfg(feature = "alloc")]
 pub use collapse::CollapseError;
+#[cfg(feature = "alloc")]
+pub use instance::{Instance, InstanceHit, Tlas};
 
 /// Marks a leaf child code.
 ///

@@ -1,0 +1,133 @@
+//! Instancing, single thread: a two-level BVH (`layout::Tlas` over BVH8 BLASes) against one BVH8
+//! over every instance's triangles transformed into the world, on the same rays, in one group per
+//! scene and ray kind; and the builds (the TLAS over built BLASes against building the flattened
+//! scene).
+//!
+//! Scenes: `bunnies` (8 x 8 bunnies, each turned about y and scaled by 0.8 to 1.2: 64 instances,
+//! 235k triangles) and `spheres` (32 x 32 icospheres of 1,280 triangles, turned and scaled: 1,024
+//! instances, 1.3M triangles). Rays: `primary` (the benches' 1024 x 1024 pinhole camera) and
+//! `diffuse` (262,144 rays from random surface points, closest hit). Hit counts are checked
+//! against each other (within 0.1%: the transform's rounding) before timing.
+//!
+//! `cargo bench --bench instance -- --noplot`
+
+#[path = "common/mod.rs"]
+mod common;
+
+use common::{bounds, diffuse_rays, primary_rays};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use glam::{Affine3A, Quat};
+use std::hint::black_box;
+use strahl::build::{BuildParams, Bvh2};
+use strahl::geometry::Triangle;
+use strahl::layout::{Bvh8, Instance, Tlas};
+use strahl::scene::{self, Rng};
+use strahl::traverse::Moller;
+use strahl::traverse::packet::TileShape;
+use strahl::{Ray, Vec3};
+
+/// `k x k` instances of `mesh` on a grid in x-z, spaced `1.5` times the mesh's size, each turned
+/// about y and scaled by 0.8 to 1.2; the instances and the world triangles.
+fn grid(mesh: &[Triangle], k: usize, seed: u64) -> (Vec<Instance>, Vec<Triangle>) {
+    let b = bounds(mesh);
+    let size = (b.max - b.min).max_element();
+    let mut rng = Rng::new(seed);
+    let inst: Vec<Instance> = (0..k * k)
+        .map(|i| {
+            let q = Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU));
+            let s = Vec3::splat(rng.range(0.8, 1.2));
+            let t = Vec3::new((i % k) as f32, 0.0, (i / k) as f32) * size * 1.5;
+            Instance::new(Affine3A::from_scale_rotation_translation(s, q, t), 0)
+        })
+        .collect();
+    let world = inst
+        .iter()
+        .flat_map(|x| mesh.iter().map(move |t| t.map(|v| x.transform.transform_point3(v))))
+        .collect();
+    (inst, world)
+}
+
+fn build_bvh8(tris: &[Triangle]) -> Bvh8 {
+    let (b2, _) = Bvh2::build(tris, &BuildParams::default()).unwrap();
+    Bvh8::from_bvh2(&b2, tris).unwrap()
+}
+
+fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, builds: bool) {
+    let (inst, world) = grid(&mesh, k, 3);
+    let blases = [build_bvh8(&mesh)];
+    let tlas = Tlas::build(&inst, &blases).unwrap();
+    let flat = build_bvh8(&world);
+    eprintln!(
+        "{name}: {} instances, {} world triangles; memory: flat BVH8 {:.1} MB, BLAS {:.2} MB + TLAS {:.3} MB",
+        inst.len(),
+        world.len(),
+        flat.memory_bytes() as f64 / 1e6,
+        blases[0].memory_bytes() as f64 / 1e6,
+        tlas.memory_bytes() as f64 / 1e6
+    );
+    let b = bounds(&world);
+    let scale = (b.max - b.min).length();
+    let kinds: [(&str, Vec<Ray>); 2] = [
+        ("primary", primary_rays(&b, 1024, 1024, TileShape::X4_2)),
+        ("diffuse", diffuse_rays(&world, 1 << 18, scale)),
+    ];
+    for (kind, rays) in &kinds {
+        let n_flat = rays.iter().filter(|r| flat.intersect::<Moller>(r).is_some()).count();
+        let n_tlas = rays
+            .iter()
+            .filter(|r| tlas.intersect::<Moller, _, 8>(&blases, r).is_some())
+            .count();
+        assert!(
+            n_flat.abs_diff(n_tlas) * 1000 <= rays.len(),
+            "{name}/{kind}: {n_flat} vs {n_tlas} hits"
+        );
+        let mut g = c.benchmark_group(format!("instance/{name}/{kind}"));
+        g.throughput(Throughput::Elements(rays.len() as u64));
+        g.sample_size(10);
+        g.bench_function("flat_bvh8", |bch| {
+            bch.iter(|| {
+                black_box(rays)
+                    .iter()
+                    .filter(|r| flat.intersect::<Moller>(r).is_some())
+                    .count()
+            })
+        });
+        g.bench_function("tlas_bvh8", |bch| {
+            bch.iter(|| {
+                black_box(rays)
+                    .iter()
+                    .filter(|r| tlas.intersect::<Moller, _, 8>(&blases, r).is_some())
+                    .count()
+            })
+        });
+        g.bench_function("flat_bvh8_occluded", |bch| {
+            bch.iter(|| black_box(rays).iter().filter(|r| flat.occluded::<Moller>(r)).count())
+        });
+        g.bench_function("tlas_bvh8_occluded", |bch| {
+            bch.iter(|| {
+                black_box(rays)
+                    .iter()
+                    .filter(|r| tlas.occluded::<Moller, _, 8>(&blases, r))
+                    .count()
+            })
+        });
+        g.finish();
+    }
+    if builds {
+        let mut g = c.benchmark_group(format!("instance/{name}/build"));
+        g.sample_size(10);
+        g.bench_function("tlas", |bch| {
+            bch.iter(|| Tlas::build(black_box(&inst), &blases).unwrap())
+        });
+        g.bench_function("flat_bvh8", |bch| bch.iter(|| build_bvh8(black_box(&world))));
+        g.finish();
+    }
+}
+
+fn benches(c: &mut Criterion) {
+    bench_scene(c, "bunnies", scene::bunny().to_soup(), 8, true);
+    bench_scene(c, "spheres", scene::icosphere(3).to_soup(), 32, false);
+}
+
+criterion_group!(instance, benches);
+criterion_main!(instance);

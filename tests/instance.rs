@@ -1,0 +1,329 @@
+//! Instancing (`layout::Tlas`): closest and any hits through the two-level BVH against brute force
+//! over every instance's triangles in its object space (bit for bit in `t`), against brute force
+//! over the triangles transformed into the world (within the transform's rounding), BVH4 against
+//! BVH8 BLASes, and bad instances and rays.
+
+use glam::{Affine3A, Quat};
+use strahl::build::{BuildParams, Bvh2};
+use strahl::geometry::{Hit, Triangle};
+use strahl::layout::{BvhWide, Instance, InstanceHit, Tlas};
+use strahl::math::Lane;
+use strahl::scene::{self, Rng};
+use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_brute_force};
+use strahl::{Ray, Vec3};
+
+/// The bottom-level meshes: the bunny, an icosphere and a clustered soup.
+fn meshes() -> Vec<Vec<Triangle>> {
+    vec![
+        scene::bunny().to_soup(),
+        scene::icosphere(2).to_soup(),
+        scene::clustered_soup(2000, 4, 7),
+    ]
+}
+
+fn blases<L: Lane, const N: usize>(meshes: &[Vec<Triangle>]) -> Vec<BvhWide<L, N>> {
+    meshes
+        .iter()
+        .map(|t| {
+            let (b2, _) = Bvh2::build(&t[..], &BuildParams::default()).unwrap();
+            BvhWide::<L, N>::from_bvh2(&b2, &t[..]).unwrap()
+        })
+        .collect()
+}
+
+/// `n` instances in a cube of side `spread`: random rotations, uniform and non-uniform scales,
+/// some mirrored (negative determinant), BLASes chosen at random.
+fn instances(n: usize, blases: u32, spread: f32, seed: u64) -> Vec<Instance> {
+    let mut rng = Rng::new(seed);
+    (0..n)
+        .map(|i| {
+            let axis = rng.unit_vector();
+            let q = Quat::from_axis_angle(axis, rng.range(0.0, std::f32::consts::TAU));
+            let s = match i % 4 {
+                0 => Vec3::splat(rng.range(0.5, 2.0)),
+                1 => Vec3::new(rng.range(0.3, 3.0), rng.range(0.3, 3.0), rng.range(0.3, 3.0)),
+                2 => Vec3::new(-rng.range(0.5, 2.0), rng.range(0.5, 2.0), rng.range(0.5, 2.0)),
+                _ => Vec3::ONE,
+            };
+            let t = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * spread;
+            Instance::new(
+                Affine3A::from_scale_rotation_translation(s, q, t),
+                (rng.u64() % blases as u64) as u32,
+            )
+        })
+        .collect()
+}
+
+/// Rays through the instances' region: from random points in random directions, aimed at
+/// instance origins from outside, with limited ranges; then bad rays.
+fn rays(n: usize, inst: &[Instance], spread: f32, seed: u64) -> Vec<Ray> {
+    let mut rng = Rng::new(seed);
+    let mut out: Vec<Ray> = (0..n)
+        .map(|i| {
+            let p = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * spread * 1.2 - Vec3::splat(spread * 0.1);
+            match i % 3 {
+                0 => Ray::new(p, rng.unit_vector()),
+                1 => {
+                    let target = inst[(rng.u64() % inst.len() as u64) as usize].transform.translation;
+                    let o = Vec3::from(target) + rng.unit_vector() * spread;
+                    Ray::new(o, Vec3::from(target) - o)
+                }
+                _ => Ray::with_range(p, rng.unit_vector() * 3.0, rng.f32() * 0.5, rng.f32() * spread * 0.3),
+            }
+        })
+        .collect();
+    out.extend([
+        Ray::new(Vec3::NAN, Vec3::X),
+        Ray::new(Vec3::ZERO, Vec3::ZERO),
+        Ray::new(Vec3::splat(f32::INFINITY), Vec3::X),
+        Ray::new(Vec3::ZERO, Vec3::new(f32::NAN, 1.0, 0.0)),
+        Ray::with_range(Vec3::ZERO, Vec3::ONE, 2.0, 1.0),
+    ]);
+    out
+}
+
+/// The reference: every usable instance's object-space ray (the same transform of the ray as
+/// the TLAS makes) against all of its BLAS's triangles by brute force; the smallest `t` wins
+/// (ties between instances: the lower index, which the check below allows either way).
+fn reference<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], ray: &Ray) -> Option<InstanceHit> {
+    let mut best: Option<InstanceHit> = None;
+    for (i, x) in inst.iter().enumerate() {
+        let m = x.transform;
+        if !(m.matrix3.is_finite() && m.translation.is_finite() && m.matrix3.determinant().abs().is_normal()) {
+            continue;
+        }
+        let Some(tris) = meshes.get(x.blas as usize) else {
+            continue;
+        };
+        let inv = m.inverse();
+        let local = Ray {
+            origin: inv.transform_point3(ray.origin),
+            tmin: ray.tmin,
+            direction: inv.transform_vector3(ray.direction),
+            tmax: ray.tmax,
+        };
+        if let Some(h) = intersect_brute_force::<T, _>(&tris[..], &local)
+            && best.is_none_or(|b| h.t < b.hit.t)
+        {
+            best = Some(InstanceHit {
+                hit: h,
+                instance: i as u32,
+            });
+        }
+    }
+    best
+}
+
+/// The same closest hit: `t` bit for bit; the instance and primitive too unless another
+/// instance's hit lies at exactly that `t` (checked through the reference per instance).
+fn same<T: TriangleTest>(
+    got: Option<InstanceHit>,
+    want: Option<InstanceHit>,
+    meshes: &[Vec<Triangle>],
+    inst: &[Instance],
+    ray: &Ray,
+    what: &str,
+) {
+    match (got, want) {
+        (None, None) => {}
+        (Some(g), Some(w)) => {
+            assert_eq!(
+                g.hit.t.to_bits(),
+                w.hit.t.to_bits(),
+                "{what}: {g:?} vs {w:?} for {ray:?}"
+            );
+            if (g.instance, g.hit.prim) != (w.instance, w.hit.prim) {
+                // A tie: the instance we got must reach exactly this t on its own.
+                let one = reference::<T>(meshes, &inst[g.instance as usize..=g.instance as usize], ray);
+                assert_eq!(
+                    one.map(|h| h.hit.t.to_bits()),
+                    Some(g.hit.t.to_bits()),
+                    "{what}: not a tie: {g:?} vs {w:?}"
+                );
+            }
+        }
+        _ => panic!("{what}: {got:?} vs {want:?} for {ray:?}"),
+    }
+}
+
+fn check<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], rays: &[Ray], what: &str) -> usize {
+    let b8 = blases::<strahl::math::f32x8, 8>(meshes);
+    let b4 = blases::<strahl::math::f32x4, 4>(meshes);
+    let tlas8 = Tlas::build(inst, &b8).unwrap();
+    let tlas4 = Tlas::build(inst, &b4).unwrap();
+    assert_eq!((tlas8.instances(), tlas8.left_out()), (inst.len(), 0));
+    let mut hits = 0;
+    for ray in rays {
+        let want = reference::<T>(meshes, inst, ray);
+        let got8 = tlas8.intersect::<T, _, 8>(&b8, ray);
+        let got4 = tlas4.intersect::<T, _, 4>(&b4, ray);
+        same::<T>(got8, want, meshes, inst, ray, &format!("{what} bvh8"));
+        same::<T>(got4, want, meshes, inst, ray, &format!("{what} bvh4"));
+        assert_eq!(
+            tlas8.occluded::<T, _, 8>(&b8, ray),
+            want.is_some(),
+            "{what}: occluded {ray:?}"
+        );
+        assert_eq!(
+            tlas4.occluded::<T, _, 4>(&b4, ray),
+            want.is_some(),
+            "{what}: occluded {ray:?}"
+        );
+        hits += usize::from(want.is_some());
+    }
+    hits
+}
+
+#[test]
+fn hits_equal_brute_force_in_object_space() {
+    let meshes = meshes();
+    for (n, spread, seed) in [(1, 4.0, 1), (7, 10.0, 2), (60, 30.0, 3)] {
+        let inst = instances(n, meshes.len() as u32, spread, seed);
+        let rays = rays(400, &inst, spread, seed + 10);
+        let a = check::<Watertight>(&meshes, &inst, &rays, &format!("watertight, {n} instances"));
+        let b = check::<Moller>(&meshes, &inst, &rays, &format!("moller, {n} instances"));
+        // The rays find something: the comparison is not between two misses.
+        assert!(a > 60 && b > 60, "{n} instances: {a} and {b} hits of {}", rays.len());
+    }
+}
+
+#[test]
+fn many_small_instances() {
+    // 3,000 instances of a 20-triangle sphere: a deep TLAS, most of the work in it.
+    let meshes = vec![scene::icosphere(0).to_soup()];
+    let inst = instances(3000, 1, 100.0, 4);
+    let rays = rays(300, &inst, 100.0, 5);
+    let hits = check::<Watertight>(&meshes, &inst, &rays, "3000 instances");
+    assert!(hits > 50, "{hits}");
+}
+
+#[test]
+fn close_to_brute_force_over_world_triangles() {
+    // The triangles transformed into the world and traced directly: the same hits up to the
+    // transform's rounding.
+    let meshes = meshes();
+    let inst = instances(40, meshes.len() as u32, 20.0, 6);
+    let world: Vec<(Triangle, u32, u32)> = inst
+        .iter()
+        .enumerate()
+        .flat_map(|(i, x)| {
+            meshes[x.blas as usize]
+                .iter()
+                .enumerate()
+                .map(move |(p, t)| (t.map(|v| x.transform.transform_point3(v)), i as u32, p as u32))
+        })
+        .collect();
+    let tris: Vec<Triangle> = world.iter().map(|w| w.0).collect();
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let tlas = Tlas::build(&inst, &b8).unwrap();
+    let rays = rays(1000, &inst, 20.0, 7);
+    let (mut both, mut one) = (0, 0);
+    for ray in &rays {
+        let w: Option<Hit> = intersect_brute_force::<Watertight, _>(&tris[..], ray);
+        let g = tlas.intersect::<Watertight, _, 8>(&b8, ray);
+        match (g, w) {
+            (Some(g), Some(w)) => {
+                both += 1;
+                let tol = 1e-4 * w.t.abs().max(1.0);
+                assert!((g.hit.t - w.t).abs() <= tol, "{g:?} vs {w:?} for {ray:?}");
+            }
+            (None, None) => {}
+            // A ray through an edge or a silhouette may fall either side of it after rounding.
+            _ => one += 1,
+        }
+    }
+    assert!(both > 200, "{both}");
+    assert!(
+        one * 200 <= rays.len(),
+        "{one} of {} rays hit in one space only",
+        rays.len()
+    );
+}
+
+#[test]
+fn identity_instance_is_the_blas() {
+    let meshes = meshes();
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    for (k, blas) in b8.iter().enumerate() {
+        let tlas = Tlas::build(&[Instance::new(Affine3A::IDENTITY, k as u32)], &b8).unwrap();
+        for ray in &rays(300, &[Instance::new(Affine3A::IDENTITY, 0)], 1.0, 8 + k as u64) {
+            let direct = blas.intersect::<Watertight>(ray);
+            assert_eq!(
+                tlas.intersect::<Watertight, _, 8>(&b8, ray).map(|h| h.hit),
+                direct,
+                "{ray:?}"
+            );
+            assert_eq!(
+                tlas.occluded::<Watertight, _, 8>(&b8, ray),
+                blas.occluded::<Watertight>(ray)
+            );
+        }
+    }
+}
+
+#[test]
+fn bad_instances_are_left_out() {
+    let meshes = meshes();
+    let mut b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    // An empty BLAS (every triangle NaN).
+    let nan = [[Vec3::NAN; 3]; 4];
+    let (e2, _) = Bvh2::build(&nan[..], &BuildParams::default()).unwrap();
+    b8.push(BvhWide::from_bvh2(&e2, &nan[..]).unwrap());
+    let empty = b8.len() as u32 - 1;
+    let at = |x: f32| Affine3A::from_translation(Vec3::new(x, 0.0, 0.0));
+    let good = Instance::new(at(0.0), 1);
+    let bad = [
+        Instance::new(Affine3A::from_translation(Vec3::NAN), 1),
+        Instance::new(Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0)), 1), // flat: not invertible
+        Instance::new(Affine3A::from_scale(Vec3::splat(1e-20)), 1),       // determinant 1e-60: not normal
+        Instance::new(Affine3A::from_scale(Vec3::splat(f32::INFINITY)), 1),
+        Instance::new(at(3.0), 99),    // no such BLAS
+        Instance::new(at(6.0), empty), // an empty BLAS
+    ];
+    let mut all = vec![good];
+    all.extend(bad);
+    let tlas = Tlas::build(&all, &b8).unwrap();
+    assert_eq!((tlas.instances(), tlas.left_out()), (7, 6));
+    assert_eq!(tlas.bvh().prim_indices, [0]); // the TLAS holds the good instance only
+    // Rays along x from the left hit only the good instance; from x = 2 nothing.
+    let from_left = Ray::new(Vec3::new(-10.0, 0.01, 0.02), Vec3::X);
+    assert_eq!(tlas.intersect::<Watertight, _, 8>(&b8, &from_left).unwrap().instance, 0);
+    assert_eq!(
+        tlas.intersect::<Watertight, _, 8>(&b8, &Ray::new(Vec3::new(2.0, 0.01, 0.02), Vec3::X)),
+        None
+    );
+    // Only bad instances: an empty TLAS that nothing hits.
+    let none = Tlas::build(&bad, &b8).unwrap();
+    assert!(none.is_empty());
+    assert_eq!(none.left_out(), 6);
+    assert_eq!(none.intersect::<Watertight, _, 8>(&b8, &from_left), None);
+    assert!(!none.occluded::<Watertight, _, 8>(&b8, &from_left));
+    // No instances at all; and tracing with a shorter BLAS slice than the build's skips the
+    // instances whose BLAS is missing.
+    assert!(Tlas::build(&[], &b8).unwrap().is_empty());
+    assert_eq!(tlas.intersect::<Watertight, _, 8>(&b8[..1], &from_left), None);
+    // Bad rays.
+    for r in rays(0, &all, 1.0, 9) {
+        assert_eq!(tlas.intersect::<Watertight, _, 8>(&b8, &r), None, "{r:?}");
+        assert!(!tlas.occluded::<Moller, _, 8>(&b8, &r), "{r:?}");
+    }
+}
+
+#[test]
+fn extreme_scales() {
+    let meshes = meshes();
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    // Scaled by 1e30: the determinant (1e90) overflows, so the instance is left out.
+    let huge = Instance::new(Affine3A::from_scale(Vec3::splat(1e30)), 1);
+    assert_eq!(Tlas::build(&[huge], &b8).unwrap().left_out(), 1);
+    // By 1e12 and 1e-12: usable, and hit where the scaled sphere (radius about 1) lies.
+    for s in [1e12f32, 1e-12] {
+        let inst = Instance::new(Affine3A::from_scale(Vec3::splat(s)), 1);
+        let tlas = Tlas::build(&[inst], &b8).unwrap();
+        assert_eq!(tlas.left_out(), 0);
+        let r = Ray::new(Vec3::new(-3.0 * s, 0.01 * s, 0.02 * s), Vec3::X);
+        let h = tlas.intersect::<Watertight, _, 8>(&b8, &r).unwrap();
+        assert!(h.hit.t.is_finite() && (h.hit.t / s - 2.0).abs() < 0.02, "{s}: {h:?}");
+        assert_eq!(Some(h), reference::<Watertight>(&meshes, &[inst], &r));
+    }
+}
