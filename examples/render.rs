@@ -1,9 +1,10 @@
 //! The main job: build a BVH, collapse it to BVH8, and render primary rays with normal shading
 //! plus ambient occlusion (any-hit rays), multithreaded over image tiles, into PNGs; print what
-//! was measured.
+//! was measured. The third built-in scene is instanced: 36 bunnies placed by a TLAS over one
+//! BVH8 (single rays there: packets do not go through instances).
 //!
 //! ```sh
-//! cargo run --release --example render                 # the bundled bunny and a sphereflake
+//! cargo run --release --example render                 # the bundled bunny, a sphereflake, 36 bunny instances
 //! cargo run --release --example render -- model.obj    # your OBJ file
 //! ```
 //! Options after the path: `--size WxH`, `--ao N` (AO rays per pixel, default 8), `--threads T`.
@@ -13,7 +14,8 @@ use strahl::build::{BuildParams, Bvh2};
 use strahl::composite::{Assignment, Tile, render_tiles};
 use strahl::geometry::offset::{hit_point, offset_origin};
 use strahl::geometry::{Triangle, Triangles};
-use strahl::layout::Bvh8;
+use strahl::glam::{Affine3A, Quat};
+use strahl::layout::{Bvh8, Instance, Tlas};
 use strahl::scene::{self, Mesh, Rng};
 use strahl::traverse::{Watertight, packet};
 use strahl::{Aabb, Hit, Ray, Vec3};
@@ -63,21 +65,83 @@ fn cosine_dir(n: Vec3, rng: &mut Rng) -> Vec3 {
     (b1 * (r * phi.cos()) + b2 * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt()).normalize()
 }
 
-fn render(name: &str, mesh: &Mesh, o: &Options) {
-    let tris: Vec<Triangle> = mesh.to_soup();
-    println!("\n== {name}: {} triangles", tris.len());
+/// What the two passes trace: a BVH8 over the scene's triangles, or a TLAS over instances.
+trait Tracer: Sync {
+    /// Closest hits of up to 8 coherent rays (one 4 x 2 tile of pixels), with the instance hit.
+    fn primary(&self, rays: &[Ray], out: &mut [Option<(Hit, u32)>]);
+    /// Any-hit answers for a batch of rays.
+    fn occluded(&self, rays: &[Ray], out: &mut [bool]);
+    /// The world-space triangle of a hit.
+    fn triangle(&self, hit: &Hit, instance: u32) -> Option<Triangle>;
+}
 
+struct Flat {
+    bvh: Bvh8,
+    tris: Vec<Triangle>,
+}
+
+impl Tracer for Flat {
+    fn primary(&self, rays: &[Ray], out: &mut [Option<(Hit, u32)>]) {
+        // Coherent: interval-culled packet traversal.
+        let mut block = [None; 8];
+        packet::intersect8::<Watertight, _, 8>(self.bvh.view(), rays, &mut block, packet::DEFAULT_SWITCH);
+        for (o, h) in out.iter_mut().zip(block) {
+            *o = h.map(|h| (h, 0));
+        }
+    }
+    fn occluded(&self, rays: &[Ray], out: &mut [bool]) {
+        // Two walks interleaved.
+        self.bvh.occluded_batch_incoherent::<Watertight>(rays, out);
+    }
+    fn triangle(&self, hit: &Hit, _: u32) -> Option<Triangle> {
+        self.tris[..].triangle(hit.prim as usize)
+    }
+}
+
+struct Instanced {
+    tlas: Tlas,
+    blases: [Bvh8; 1],
+    tris: Vec<Triangle>,
+    instances: Vec<Instance>,
+}
+
+impl Tracer for Instanced {
+    fn primary(&self, rays: &[Ray], out: &mut [Option<(Hit, u32)>]) {
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self
+                .tlas
+                .intersect::<Watertight, _, 8>(&self.blases, r)
+                .map(|h| (h.hit, h.instance));
+        }
+    }
+    fn occluded(&self, rays: &[Ray], out: &mut [bool]) {
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self.tlas.occluded::<Watertight, _, 8>(&self.blases, r);
+        }
+    }
+    fn triangle(&self, hit: &Hit, instance: u32) -> Option<Triangle> {
+        let m = self.instances.get(instance as usize)?.transform;
+        Some(
+            self.tris[..]
+                .triangle(hit.prim as usize)?
+                .map(|v| m.transform_point3(v)),
+        )
+    }
+}
+
+/// Builds a binned-SAH BVH2 of `tris` on `o.threads` and collapses it to BVH8; prints the figures.
+fn build(tris: &[Triangle], o: &Options) -> Option<(Bvh2, Bvh8)> {
     let t0 = Instant::now();
-    let (bvh2, stats) = match Bvh2::build_par(&tris[..], &BuildParams::default(), o.threads) {
+    let (bvh2, stats) = match Bvh2::build_par(tris, &BuildParams::default(), o.threads) {
         Ok(b) => b,
         Err(e) => {
-            eprintln!("cannot build a BVH for {name}: {e}");
-            return;
+            eprintln!("cannot build a BVH: {e}");
+            return None;
         }
     };
     let build_s = t0.elapsed().as_secs_f64();
     let t0 = Instant::now();
-    let bvh = Bvh8::from_bvh2_par(&bvh2, &tris[..], o.threads).expect("a built tree collapses");
+    let bvh = Bvh8::from_bvh2_par(&bvh2, tris, o.threads).expect("a built tree collapses");
     let collapse_s = t0.elapsed().as_secs_f64();
     println!(
         "build: binned SAH on up to {} threads {:.1} ms ({:.1} M tri/s, {} invalid triangles skipped), collapse to BVH8 {:.1} ms, SAH cost {:.1}, {} BVH8 nodes",
@@ -89,26 +153,88 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
         bvh2.sah_cost(1.0, 1.0),
         bvh.nodes().len()
     );
+    Some((bvh2, bvh))
+}
+
+fn render(name: &str, mesh: &Mesh, o: &Options) {
+    let tris: Vec<Triangle> = mesh.to_soup();
+    println!("\n== {name}: {} triangles", tris.len());
+    let Some((bvh2, bvh)) = build(&tris, o) else {
+        return;
+    };
     if bvh.is_empty() {
         println!("nothing to render");
         return;
     }
-
-    let (w, h) = (o.width, o.height);
     let bounds = bvh2.bounds();
-    let cam = Camera::framing(&bounds, w as f32 / h as f32);
+    shade(name, &Flat { bvh, tris }, &bounds, o);
+}
+
+/// `k x k` instances of `mesh` on a grid, each turned about y and scaled by 0.7 to 1.3: one BLAS,
+/// a TLAS over the instances.
+fn render_instances(name: &str, mesh: &Mesh, k: usize, o: &Options) {
+    let tris: Vec<Triangle> = mesh.to_soup();
+    println!(
+        "\n== {name}: {} instances of one {}-triangle BLAS ({} triangles in the world)",
+        k * k,
+        tris.len(),
+        k * k * tris.len()
+    );
+    let Some((bvh2, blas)) = build(&tris, o) else {
+        return;
+    };
+    if blas.is_empty() {
+        println!("nothing to render");
+        return;
+    }
+    let b = bvh2.bounds();
+    let size = (b.max - b.min).max_element();
+    let mut rng = Rng::new(11);
+    let instances: Vec<Instance> = (0..k * k)
+        .map(|i| {
+            let q = Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU));
+            let s = Vec3::splat(rng.range(0.7, 1.3));
+            let t = Vec3::new((i % k) as f32, 0.0, (i / k) as f32) * size * 1.2;
+            Instance::new(Affine3A::from_scale_rotation_translation(s, q, t), 0)
+        })
+        .collect();
+    let blases = [blas];
+    let t0 = Instant::now();
+    let tlas = Tlas::build(&instances, &blases).expect("a few instances build");
+    println!(
+        "TLAS over {} instances in {:.3} ms ({} left out); memory: BLAS {:.2} MB + TLAS {:.3} MB",
+        tlas.instances(),
+        t0.elapsed().as_secs_f64() * 1e3,
+        tlas.left_out(),
+        blases[0].memory_bytes() as f64 / 1e6,
+        tlas.memory_bytes() as f64 / 1e6
+    );
+    let bounds = tlas.bvh().bounds();
+    let scene = Instanced {
+        tlas,
+        blases,
+        tris,
+        instances,
+    };
+    shade(name, &scene, &bounds, o);
+}
+
+/// Pass 1, primary rays (closest hit) in 4 x 2 tiles; pass 2, normal shading with `o.ao`
+/// ambient-occlusion rays per hit pixel; the PNG and the figures.
+fn shade(name: &str, scene: &dyn Tracer, bounds: &Aabb, o: &Options) {
+    let (w, h) = (o.width, o.height);
+    let cam = Camera::framing(bounds, w as f32 / h as f32);
     let scale = (bounds.max - bounds.min).length();
 
     // Pass 1: primary rays (closest hit), tiles from a queue.
     let t0 = Instant::now();
-    // Primary rays as packets of 4 x 2 pixels (coherent: interval-culled packet traversal).
     let (hits, _) = render_tiles(
         w,
         h,
         16,
         o.threads,
         Assignment::Dynamic,
-        |t: Tile, out: &mut [Option<Hit>]| {
+        |t: Tile, out: &mut [Option<(Hit, u32)>]| {
             let tw = t.x1 - t.x0;
             // Once per tile: every packet overwrites the entries it uses.
             let mut block = [None; 8];
@@ -124,7 +250,7 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
                             n += 1;
                         }
                     }
-                    packet::intersect8::<Watertight, _, 8>(bvh.view(), &rays[..n], &mut block, packet::DEFAULT_SWITCH);
+                    scene.primary(&rays[..n], &mut block[..n]);
                     for (i, &j) in at[..n].iter().enumerate() {
                         out[j] = block[i];
                     }
@@ -146,17 +272,17 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
         Assignment::Dynamic,
         |t: Tile, out: &mut [[u8; 3]]| {
             let tw = t.x1 - t.x0;
-            // One pixel's AO rays go to `occluded_batch_incoherent` together (two walks interleaved).
+            // One pixel's AO rays are traced together.
             let (mut ao_rays, mut occ) = (Vec::with_capacity(o.ao as usize), vec![false; o.ao as usize]);
             for (i, px) in out.iter_mut().enumerate() {
                 let (x, y) = (t.x0 + i as u32 % tw, t.y0 + i as u32 / tw);
                 let ray = cam.ray(x, y, w, h);
-                let Some(hit) = hits[(y * w + x) as usize] else {
+                let Some((hit, instance)) = hits[(y * w + x) as usize] else {
                     let g = (40.0 + 30.0 * (y as f32 / h as f32)) as u8;
                     *px = [g, g, g + 10];
                     continue;
                 };
-                let Some([a, b, c]) = tris[..].triangle(hit.prim as usize) else {
+                let Some([a, b, c]) = scene.triangle(&hit, instance) else {
                     continue;
                 };
                 let mut n = (b - a).cross(c - a).normalize_or_zero();
@@ -168,7 +294,7 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
                 let mut rng = Rng::new((y as u64) << 32 | x as u64);
                 ao_rays.clear();
                 ao_rays.extend((0..o.ao).map(|_| Ray::with_range(p, cosine_dir(n, &mut rng), 0.0, scale * 0.1)));
-                bvh.occluded_batch_incoherent::<Watertight>(&ao_rays, &mut occ);
+                scene.occluded(&ao_rays, &mut occ);
                 let open = occ.iter().filter(|&&blocked| !blocked).count();
                 let ao = if o.ao == 0 { 1.0 } else { open as f32 / o.ao as f32 };
                 let base = n * 0.5 + Vec3::splat(0.5);
@@ -261,6 +387,7 @@ fn main() {
         None => {
             render("bunny", &scene::bunny(), &o);
             render("sphereflake", &scene::sphereflake(2, 2), &o);
+            render_instances("bunnies", &scene::bunny(), 6, &o);
         }
     }
 }

@@ -327,3 +327,51 @@ fn extreme_scales() {
         assert_eq!(Some(h), reference::<Watertight>(&meshes, &[inst], &r));
     }
 }
+
+#[test]
+fn secondary_rays_from_offset_hit_points_do_not_hit_their_own_triangle() {
+    // The renderer's pattern: the hit point from the world triangle (the BLAS triangle through the
+    // instance's transform) and the barycentrics, moved off the surface by `offset_origin`, then
+    // rays into the hemisphere on the ray's side. The transform's rounding (world triangle, and
+    // the ray's origin into object space) must stay inside the offset's margin. (Without the
+    // offset, the same rays re-hit their own triangles.)
+    use strahl::geometry::offset::{hit_point, offset_origin};
+    let meshes = meshes();
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let mut checked = 0;
+    for (spread, seed) in [(10.0f32, 21u64), (1e4, 22)] {
+        let inst = instances(30, meshes.len() as u32, spread, seed);
+        let tlas = Tlas::build(&inst, &b8).unwrap();
+        let mut rng = Rng::new(seed + 100);
+        for ray in &rays(2000, &inst, spread, seed + 1) {
+            let Some(h) = tlas.intersect::<Watertight, _, 8>(&b8, ray) else {
+                continue;
+            };
+            let x = inst[h.instance as usize];
+            let tri = meshes[x.blas as usize][h.hit.prim as usize].map(|v| x.transform.transform_point3(v));
+            let mut n = (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero();
+            if n == Vec3::ZERO {
+                continue;
+            }
+            if n.dot(ray.direction) > 0.0 {
+                n = -n;
+            }
+            let p = offset_origin(hit_point(&tri, &h.hit), n);
+            for _ in 0..4 {
+                let mut d = rng.unit_vector();
+                if d.dot(n) < 0.0 {
+                    d = -d;
+                }
+                if let Some(again) = tlas.intersect::<Watertight, _, 8>(&b8, &Ray::new(p, d)) {
+                    assert!(
+                        (again.instance, again.hit.prim) != (h.instance, h.hit.prim),
+                        "spread {spread}: re-hit its own triangle at t {} from {p:?}",
+                        again.hit.t
+                    );
+                }
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 1000, "{checked}");
+}
