@@ -115,9 +115,7 @@ impl Tracer for Instanced {
         }
     }
     fn occluded(&self, rays: &[Ray], out: &mut [bool]) {
-        for (o, r) in out.iter_mut().zip(rays) {
-            *o = self.tlas.occluded::<Watertight, _, 8>(&self.blases, r);
-        }
+        self.tlas.occluded_batch::<Watertight, _, 8>(&self.blases, rays, out);
     }
     fn triangle(&self, hit: &Hit, instance: u32) -> Option<Triangle> {
         let m = self.instances.get(instance as usize)?.transform;

@@ -171,6 +171,17 @@ fn check<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], rays: &[R
         );
         hits += usize::from(want.is_some());
     }
+    // The batch forms, on one thread and on three, answer as one call per ray.
+    let single: Vec<Option<InstanceHit>> = rays.iter().map(|r| tlas8.intersect::<T, _, 8>(&b8, r)).collect();
+    let occ: Vec<bool> = rays.iter().map(|r| tlas8.occluded::<T, _, 8>(&b8, r)).collect();
+    let (mut hb, mut hp) = (vec![None; rays.len()], vec![None; rays.len()]);
+    tlas8.intersect_batch::<T, _, 8>(&b8, rays, &mut hb);
+    tlas8.intersect_batch_par::<T, _, 8>(&b8, rays, &mut hp, 3);
+    assert_eq!((&hb, &hp), (&single, &single), "{what}: batches");
+    let (mut ob, mut op) = (vec![false; rays.len()], vec![false; rays.len()]);
+    tlas8.occluded_batch::<T, _, 8>(&b8, rays, &mut ob);
+    tlas8.occluded_batch_par::<T, _, 8>(&b8, rays, &mut op, 3);
+    assert_eq!((&ob, &op), (&occ, &occ), "{what}: occluded batches");
     hits
 }
 

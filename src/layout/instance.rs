@@ -318,6 +318,114 @@ impl Tlas {
         self.walk::<T, L, N, true>(blases, ray).is_some()
     }
 
+    /// [`intersect`](Self::intersect) for every ray of a batch: `hits[i]` for `rays[i]` (the
+    /// shorter length wins).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let row: Vec<Instance> = (0..4)
+    ///     .map(|i| Instance::new(strahl::glam::Affine3A::from_translation(Vec3::new(3.0 * i as f32, 0.0, 0.0)), 0))
+    ///     .collect();
+    /// let tlas = Tlas::build(&row, &blases).unwrap();
+    /// let rays: Vec<Ray> = (0..5).map(|i| Ray::new(Vec3::new(3.0 * i as f32, 0.1, -5.0), Vec3::Z)).collect();
+    /// let mut hits = [None; 5];
+    /// tlas.intersect_batch::<Moller, _, 8>(&blases, &rays, &mut hits);
+    /// assert_eq!(hits.map(|h| h.map(|h| h.instance)), [Some(0), Some(1), Some(2), Some(3), None]);
+    /// ```
+    pub fn intersect_batch<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        hits: &mut [Option<InstanceHit>],
+    ) {
+        for (r, h) in rays.iter().zip(hits.iter_mut()) {
+            *h = self.intersect::<T, L, N>(blases, r);
+        }
+    }
+
+    /// [`occluded`](Self::occluded) for every ray of a batch: `out[i]` for `rays[i]` (the
+    /// shorter length wins).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let tlas = Tlas::build(&[Instance::new(strahl::glam::Affine3A::IDENTITY, 0)], &blases).unwrap();
+    /// let rays = [Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z), Ray::new(Vec3::new(0.0, 0.0, -5.0), -Vec3::Z)];
+    /// let mut out = [false; 2];
+    /// tlas.occluded_batch::<Moller, _, 8>(&blases, &rays, &mut out);
+    /// assert_eq!(out, [true, false]);
+    /// ```
+    pub fn occluded_batch<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        out: &mut [bool],
+    ) {
+        for (r, o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.occluded::<T, L, N>(blases, r);
+        }
+    }
+
+    /// [`intersect_batch`](Self::intersect_batch) on `threads` threads (`std`; chunks of 1024
+    /// rays), the same hits.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(1).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let tlas = Tlas::build(&[Instance::new(strahl::glam::Affine3A::IDENTITY, 0)], &blases).unwrap();
+    /// let rays: Vec<Ray> = (0..3000).map(|i| Ray::new(Vec3::new((i % 9) as f32 * 0.3 - 1.2, 0.1, -5.0), Vec3::Z)).collect();
+    /// let (mut one, mut two) = (vec![None; rays.len()], vec![None; rays.len()]);
+    /// tlas.intersect_batch::<Moller, _, 8>(&blases, &rays, &mut one);
+    /// tlas.intersect_batch_par::<Moller, _, 8>(&blases, &rays, &mut two, 2);
+    /// assert_eq!(one, two);
+    /// assert!(one.iter().any(Option::is_some) && one.iter().any(Option::is_none));
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn intersect_batch_par<T: TriangleTest, L: Lane + Sync, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        hits: &mut [Option<InstanceHit>],
+        threads: usize,
+    ) {
+        wide::par_chunks(rays, hits, threads, |r, h| {
+            self.intersect_batch::<T, L, N>(blases, r, h)
+        });
+    }
+
+    /// [`occluded_batch`](Self::occluded_batch) on `threads` threads (`std`; chunks of 1024
+    /// rays), the same answers.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(1).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let tlas = Tlas::build(&[Instance::new(strahl::glam::Affine3A::IDENTITY, 0)], &blases).unwrap();
+    /// let rays: Vec<Ray> = (0..3000).map(|i| Ray::new(Vec3::new((i % 9) as f32 * 0.3 - 1.2, 0.1, -5.0), Vec3::Z)).collect();
+    /// let (mut one, mut two) = (vec![false; rays.len()], vec![false; rays.len()]);
+    /// tlas.occluded_batch::<Moller, _, 8>(&blases, &rays, &mut one);
+    /// tlas.occluded_batch_par::<Moller, _, 8>(&blases, &rays, &mut two, 2);
+    /// assert_eq!(one, two);
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn occluded_batch_par<T: TriangleTest, L: Lane + Sync, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        out: &mut [bool],
+        threads: usize,
+    ) {
+        wide::par_chunks(rays, out, threads, |r, o| self.occluded_batch::<T, L, N>(blases, r, o));
+    }
+
     /// The hit of `ray` (world space, with `tmax` the closest hit so far) in instance `i`.
     /// `ANY`: any hit (its `t` is then `tmax`, the only thing the caller reads being `Some`).
     #[inline(always)]

@@ -886,7 +886,12 @@ fn reordered<O>(
 
 /// Runs `f` over matching chunks of `input` and `out` (1024 items each) on `threads` threads.
 #[cfg(feature = "std")]
-fn par_chunks<I: Sync, O: Send, F: Fn(&[I], &mut [O]) + Sync>(input: &[I], out: &mut [O], threads: usize, f: F) {
+pub(crate) fn par_chunks<I: Sync, O: Send, F: Fn(&[I], &mut [O]) + Sync>(
+    input: &[I],
+    out: &mut [O],
+    threads: usize,
+    f: F,
+) {
     const CHUNK: usize = 1024;
     let n = input.len().min(out.len());
     let jobs: alloc::vec::Vec<_> = input[..n].chunks(CHUNK).zip(out[..n].chunks_mut(CHUNK)).collect();
