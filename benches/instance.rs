@@ -9,10 +9,16 @@
 //! `diffuse` (262,144 rays from random surface points, closest hit). Hit counts are checked
 //! against each other (within 0.1%: the transform's rounding) before timing.
 //!
-//! `cargo bench --bench instance -- --noplot`
+//! With `--features embree`, Embree 3 in the same groups: its instancing (a top scene of
+//! `RTC_GEOMETRY_TYPE_INSTANCE` geometries over one mesh scene, `embree_instances`) and the
+//! flattened scene (`embree_flat`), `rtcIntersect1` / `rtcOccluded1`, default (non-robust) mode.
+//!
+//! `cargo bench --bench instance -- --noplot` (add `--features embree` for Embree)
 
 #[path = "common/mod.rs"]
 mod common;
+#[path = "peers/mod.rs"]
+mod peers;
 
 use common::{bounds, diffuse_rays, primary_rays};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
@@ -65,6 +71,29 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
         blases[0].memory_bytes() as f64 / 1e6,
         tlas.memory_bytes() as f64 / 1e6
     );
+    #[cfg(feature = "embree")]
+    let embree = {
+        use peers::embree::{Device, InstanceScene, Quality, Scene};
+        let device: &'static Device = Box::leak(Box::new(Device::single_threaded()));
+        let xfms: Vec<[f32; 12]> = inst
+            .iter()
+            .map(|x| {
+                let m = x.transform;
+                let c = |v: glam::Vec3A| [v.x, v.y, v.z];
+                let mut a = [0.0; 12];
+                a[0..3].copy_from_slice(&c(m.matrix3.x_axis));
+                a[3..6].copy_from_slice(&c(m.matrix3.y_axis));
+                a[6..9].copy_from_slice(&c(m.matrix3.z_axis));
+                a[9..12].copy_from_slice(&c(m.translation));
+                a
+            })
+            .collect();
+        (
+            device,
+            InstanceScene::new(device, &mesh, &xfms, Quality::Medium),
+            Scene::new(device, &world, Quality::Medium),
+        )
+    };
     let b = bounds(&world);
     let scale = (b.max - b.min).length();
     let kinds: [(&str, Vec<Ray>); 2] = [
@@ -111,6 +140,24 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
                     .count()
             })
         });
+        #[cfg(feature = "embree")]
+        {
+            let (ei, ef) = (&embree.1, &embree.2);
+            let n_embree = rays.iter().filter(|r| ei.intersect1(r).is_some()).count();
+            assert!(n_embree.abs_diff(n_tlas) * 1000 <= rays.len(), "{name}/{kind}: Embree {n_embree} vs {n_tlas} hits");
+            g.bench_function("embree_flat", |bch| {
+                bch.iter(|| black_box(rays).iter().filter(|r| ef.intersect1(r).is_some()).count())
+            });
+            g.bench_function("embree_instances", |bch| {
+                bch.iter(|| black_box(rays).iter().filter(|r| ei.intersect1(r).is_some()).count())
+            });
+            g.bench_function("embree_flat_occluded", |bch| {
+                bch.iter(|| black_box(rays).iter().filter(|r| ef.occluded1(r)).count())
+            });
+            g.bench_function("embree_instances_occluded", |bch| {
+                bch.iter(|| black_box(rays).iter().filter(|r| ei.occluded1(r)).count())
+            });
+        }
         g.finish();
     }
     if builds {

@@ -17,6 +17,8 @@ type RTCBVH = *mut c_void;
 type RTCThreadLocalAllocator = *mut c_void;
 
 const RTC_GEOMETRY_TYPE_TRIANGLE: c_uint = 0;
+const RTC_GEOMETRY_TYPE_INSTANCE: c_uint = 121;
+const RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR: c_uint = 0x9234;
 const RTC_BUFFER_TYPE_INDEX: c_uint = 0;
 const RTC_BUFFER_TYPE_VERTEX: c_uint = 1;
 const RTC_FORMAT_UINT3: c_uint = 0x5003;
@@ -182,6 +184,8 @@ unsafe extern "C" {
         count: usize,
     );
     fn rtcUpdateGeometryBuffer(geometry: RTCGeometry, ty: c_uint, slot: c_uint);
+    fn rtcSetGeometryInstancedScene(geometry: RTCGeometry, scene: RTCScene);
+    fn rtcSetGeometryTransform(geometry: RTCGeometry, time_step: c_uint, format: c_uint, xfm: *const c_void);
     fn rtcIntersect1(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
     fn rtcOccluded1(scene: RTCScene, ctx: *mut RTCIntersectContext, ray: *mut RTCRay);
     fn rtcIntersect8(valid: *const i32, scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit8);
@@ -334,6 +338,64 @@ impl<'d> Scene<'d> {
 impl Drop for Scene<'_> {
     fn drop(&mut self) {
         // SAFETY: created by rtcNewScene, released once.
+        unsafe { rtcReleaseScene(self.scene) }
+    }
+}
+
+/// Embree's instancing: one triangle-mesh scene (the BLAS) and a top scene of instances of it,
+/// each with an object-to-world transform (3 x 4, column-major: the three axes, then the
+/// translation).
+#[allow(dead_code)] // used by some bench targets only
+pub struct InstanceScene<'d> {
+    scene: RTCScene,
+    _blas: Scene<'d>,
+}
+
+#[allow(dead_code)] // used by some bench targets only
+impl<'d> InstanceScene<'d> {
+    /// Builds the BLAS over `tris` and the top scene over `transforms`, both at `quality`.
+    pub fn new(device: &'d Device, tris: &[[Vec3; 3]], transforms: &[[f32; 12]], quality: Quality) -> Self {
+        let blas = Scene::new(device, tris, quality);
+        // SAFETY: standard Embree instance setup on a live device: the instanced scene is
+        // committed (by `Scene::new`) and outlives the top scene (kept in `_blas`, dropped after
+        // `scene`'s release in `drop`); each transform is 12 floats, copied by Embree.
+        unsafe {
+            let scene = rtcNewScene(device.0);
+            rtcSetSceneBuildQuality(scene, quality as c_uint);
+            for xfm in transforms {
+                let g = rtcNewGeometry(device.0, RTC_GEOMETRY_TYPE_INSTANCE);
+                rtcSetGeometryInstancedScene(g, blas.scene);
+                rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, xfm.as_ptr().cast());
+                rtcCommitGeometry(g);
+                rtcAttachGeometry(scene, g);
+                rtcReleaseGeometry(g);
+            }
+            rtcCommitScene(scene);
+            assert_eq!(rtcGetDeviceError(device.0), 0, "Embree reported an error");
+            Self { scene, _blas: blas }
+        }
+    }
+
+    /// Closest hit: `(t, primitive)`.
+    #[inline]
+    pub fn intersect1(&self, r: &Ray) -> Option<(f32, u32)> {
+        intersect1(self.scene, r)
+    }
+
+    /// Any hit in `[tmin, tmax]`.
+    #[inline]
+    pub fn occluded1(&self, r: &Ray) -> bool {
+        let mut ray = Scene::ray(r);
+        let mut ctx = context();
+        // SAFETY: as in `intersect1`.
+        unsafe { rtcOccluded1(self.scene, &mut ctx, &mut ray) };
+        ray.tfar == f32::NEG_INFINITY
+    }
+}
+
+impl Drop for InstanceScene<'_> {
+    fn drop(&mut self) {
+        // SAFETY: created by rtcNewScene, released once (before the instanced scene).
         unsafe { rtcReleaseScene(self.scene) }
     }
 }
