@@ -144,7 +144,10 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
         {
             let (ei, ef) = (&embree.1, &embree.2);
             let n_embree = rays.iter().filter(|r| ei.intersect1(r).is_some()).count();
-            assert!(n_embree.abs_diff(n_tlas) * 1000 <= rays.len(), "{name}/{kind}: Embree {n_embree} vs {n_tlas} hits");
+            assert!(
+                n_embree.abs_diff(n_tlas) * 1000 <= rays.len(),
+                "{name}/{kind}: Embree {n_embree} vs {n_tlas} hits"
+            );
             g.bench_function("embree_flat", |bch| {
                 bch.iter(|| black_box(rays).iter().filter(|r| ef.intersect1(r).is_some()).count())
             });

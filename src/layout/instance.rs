@@ -12,8 +12,9 @@
 //! - **Build** ([`Tlas::build`]): each instance's world box is the BLAS's root box through the
 //!   transform (centre and half extent, `|M| e`), padded by `2^-16` of its size and distance
 //!   from the origin against the rounding of the transform; then a full-sweep SAH BVH2 over those
-//!   boxes ([`BuildParams::quality`]: a TLAS holds few boxes, and it is rebuilt, not refitted,
-//!   when instances move: about 1 ms per 10,000 instances).
+//!   boxes with one instance per leaf ([`BuildParams::quality`]: a TLAS holds few boxes, and it
+//!   is rebuilt, not refitted, when instances move), collapsed greedily (largest child opened
+//!   first) into 4-wide nodes whose child boxes sit in SoA lanes for the x4 slab test.
 //! - **Bad input**: an instance whose transform is not finite or not invertible (`|det M|` not
 //!   a normal float), whose BLAS index is out of range, or whose BLAS is empty is left out (never
 //!   hit) and counted in [`Tlas::left_out`]. Rays follow the crate's policy (NaN, infinite or
@@ -48,11 +49,13 @@
 //! assert!(!tlas.occluded::<Moller, _, 8>(&blases, &Ray::new(Vec3::ZERO, -Vec3::X)));
 //! ```
 
-use crate::build::{BuildError, BuildParams, Bvh2, Node};
+use crate::build::{BuildError, BuildParams, Bvh2};
 use crate::geometry::{Aabb, Hit, Ray};
-use crate::layout::BvhWide;
-use crate::math::Lane;
-use crate::traverse::{STACK_SIZE, TriangleTest, beyond, node_scalar, prepare, wide};
+use crate::intersect::AabbLanes;
+use crate::layout::{BvhWide, EMPTY_CHILD, LEAF_BIT};
+use crate::math::{Lane, f32x4};
+use crate::traverse::{STACK_SIZE, TriangleTest, beyond, node_lanes, prepare, wide};
+use alloc::vec;
 use alloc::vec::Vec;
 use glam::{Affine3A, Vec3, Vec3A};
 
@@ -124,11 +127,97 @@ pub struct InstanceHit {
 #[derive(Clone, Debug, Default)]
 pub struct Tlas {
     bvh: Bvh2,
+    /// `bvh` collapsed to 4-wide nodes (what the traversals walk).
+    nodes: Vec<TlasNode>,
     /// World to object, per instance (identity for instances left out).
     inverse: Vec<Affine3A>,
     /// BLAS index per instance.
     blas: Vec<u32>,
     left_out: u32,
+}
+
+/// A 4-wide TLAS node: child boxes in SoA lanes; child codes a node index, [`LEAF_BIT`] with an
+/// instance index, or [`EMPTY_CHILD`] (its box empty, so never hit).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct TlasNode {
+    bounds: AabbLanes<f32x4>,
+    child: [u32; 4],
+}
+
+const _: () = assert!(core::mem::size_of::<TlasNode>() == 112);
+
+/// Collapses `bvh` (leaves of one instance each) into 4-wide nodes: each node takes its binary
+/// node's two children and opens the interior child of largest surface area until it has four
+/// (Wald et al. 2008's greedy collapse). Explicit stack; node 0 is the root.
+fn collapse(bvh: &Bvh2) -> Vec<TlasNode> {
+    let nodes = &bvh.nodes;
+    let Some(root) = nodes.first() else {
+        return Vec::new();
+    };
+    let code = |i: u32| {
+        let n = &nodes[i as usize];
+        // NOTE: the TLAS is built with leaves of one instance; instance indices stay below
+        // `MAX_PRIMITIVES = 2^31 - 1` (the builder refuses more), so `LEAF_BIT | index` is never
+        // `EMPTY_CHILD`.
+        if n.is_leaf() {
+            LEAF_BIT | bvh.prim_indices[n.index as usize]
+        } else {
+            i
+        }
+    };
+    let mut out = vec![TlasNode {
+        bounds: AabbLanes::empty(),
+        child: [EMPTY_CHILD; 4],
+    }];
+    // (binary node, wide slot): a single-leaf tree gets a root holding that leaf.
+    let mut stack = vec![(0u32, 0usize)];
+    let one = root.is_leaf();
+    while let Some((b, at)) = stack.pop() {
+        let mut kids: Vec<u32> = if one {
+            vec![0]
+        } else {
+            vec![nodes[b as usize].left(), nodes[b as usize].right()]
+        };
+        while kids.len() < 4 {
+            // The interior child of largest area, if any.
+            let open = kids
+                .iter()
+                .enumerate()
+                .filter(|&(_, &k)| !nodes[k as usize].is_leaf())
+                .max_by(|a, b| {
+                    nodes[*a.1 as usize]
+                        .aabb()
+                        .half_area()
+                        .total_cmp(&nodes[*b.1 as usize].aabb().half_area())
+                })
+                .map(|(i, _)| i);
+            let Some(i) = open else {
+                break;
+            };
+            let k = kids.swap_remove(i);
+            kids.extend([nodes[k as usize].left(), nodes[k as usize].right()]);
+        }
+        let boxes: Vec<Aabb> = kids.iter().map(|&k| nodes[k as usize].aabb()).collect();
+        let mut child = [EMPTY_CHILD; 4];
+        for (c, &k) in child.iter_mut().zip(&kids) {
+            *c = if nodes[k as usize].is_leaf() {
+                code(k)
+            } else {
+                out.push(TlasNode {
+                    bounds: AabbLanes::empty(),
+                    child: [EMPTY_CHILD; 4],
+                });
+                stack.push((k, out.len() - 1));
+                (out.len() - 1) as u32
+            };
+        }
+        out[at] = TlasNode {
+            bounds: AabbLanes::from_boxes(&boxes),
+            child,
+        };
+    }
+    out
 }
 
 /// Relative padding of an instance's world box against the rounding of its transform.
@@ -205,8 +294,16 @@ impl Tlas {
                 }
             }
         }
-        let (bvh, _) = Bvh2::build(&boxes[..], &BuildParams::quality())?;
+        // One instance per leaf: an instance costs a transform and a BLAS walk, far more than a
+        // box test.
+        let params = BuildParams {
+            min_leaf_size: 1,
+            max_leaf_size: 1,
+            ..BuildParams::quality()
+        };
+        let (bvh, _) = Bvh2::build(&boxes[..], &params)?;
         Ok(Self {
+            nodes: collapse(&bvh),
             bvh,
             inverse,
             blas: instances.iter().map(|i| i.blas).collect(),
@@ -242,11 +339,14 @@ impl Tlas {
     /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
     /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
     /// let tlas = Tlas::build(&[Instance::new(strahl::glam::Affine3A::IDENTITY, 0)], &blases).unwrap();
-    /// assert_eq!(tlas.memory_bytes(), 32 + 4 + size_of::<strahl::glam::Affine3A>() + 4); // one leaf
+    /// // One binary leaf (32 bytes) and its index (4), one 4-wide node (112), one inverse (64), one
+    /// // BLAS index (4).
+    /// assert_eq!(tlas.memory_bytes(), 32 + 4 + 112 + size_of::<strahl::glam::Affine3A>() + 4);
     /// ```
     pub fn memory_bytes(&self) -> usize {
         core::mem::size_of_val(self.bvh.nodes.as_slice())
             + core::mem::size_of_val(self.bvh.prim_indices.as_slice())
+            + core::mem::size_of_val(self.nodes.as_slice())
             + core::mem::size_of_val(self.inverse.as_slice())
             + core::mem::size_of_val(self.blas.as_slice())
     }
@@ -460,84 +560,81 @@ impl Tlas {
         }
     }
 
-    /// The TLAS walk: near child first, the far one on the stack with its entry distance.
-    // PERF: tried (2026-12-05): the TLAS built with one instance per leaf and collapsed into
-    // 4-wide nodes (x4 slab test, hits sorted near to far). The instance bench's primary and
-    // diffuse rays through it were no faster than through this binary walk (ratios to the
-    // flattened BVH8 within 0.01-0.04 of this one's in the same run): the time goes to the
-    // instances entered (transform, ray set-up, BLAS walk from its root), not to the top level.
+    /// The TLAS walk over 4-wide nodes: children hit in order of entry distance, the nearest
+    /// next and the others on the stack (farthest deepest) with their entry distances.
+    // PERF: against the binary TLAS walk it replaced (scalar slab tests, leaves of up to 8
+    // instances), the same run of `cargo bench --features embree --bench instance` (Intel Xeon,
+    // 2026-12-05): diffuse rays 66.8 -> 61.3 ms (bunnies), 81.1 -> 70.2 ms (spheres); primary
+    // rays 50.0 -> 50.6 and 58.2 -> 59.7 ms (within the noise). Embree's instancing in that run:
+    // 46.0 / 50.0 / 52.8 / 54.0 ms (primary and diffuse, bunnies and spheres).
     #[inline(always)]
     fn walk<T: TriangleTest, L: Lane, const N: usize, const ANY: bool>(
         &self,
         blases: &[BvhWide<L, N>],
         ray: &Ray,
     ) -> Option<InstanceHit> {
-        let nodes = &self.bvh.nodes;
         let mut r = prepare::<T>(ray);
-        if r.is_empty() {
+        if r.is_empty() || self.nodes.is_empty() {
             return None;
         }
-        let root = nodes.first()?;
-        node_scalar::<T>(&r, &root.aabb())?;
-        let mut stack = [(0u32, 0.0f32); STACK_SIZE];
+        // A tree of depth `d` keeps at most `3 (d - 1) + 1` entries; the builder bounds `d` by
+        // `STACK_SIZE`.
+        let mut stack = [(0u32, 0.0f32); 3 * STACK_SIZE + 1];
         let mut sp = 0usize;
-        let mut node: &Node = root;
+        let mut cur = 0u32;
         let mut best: Option<InstanceHit> = None;
         loop {
-            if node.is_leaf() {
-                for slot in node.prim_range() {
-                    let Some(&i) = self.bvh.prim_indices.get(slot) else {
-                        break;
-                    };
-                    if let Some(h) = self.trace_instance::<T, L, N, ANY>(blases, i, ray, r.tmax) {
-                        best = Some(InstanceHit { hit: h, instance: i });
-                        if ANY {
-                            return best;
+            if cur & LEAF_BIT == 0 {
+                if let Some(node) = self.nodes.get(cur as usize) {
+                    let (dist, mut mask) = node_lanes::<T, f32x4>(&r, &node.bounds);
+                    let d = dist.to_array();
+                    // The hit children, nearest first (ties: the lower slot).
+                    let mut hit = [(0u32, 0.0f32); 4];
+                    let mut n = 0;
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let mut j = n;
+                        while j > 0 && hit[j - 1].1 > d[i] {
+                            hit[j] = hit[j - 1];
+                            j -= 1;
                         }
-                        r.tmax = h.t;
+                        hit[j] = (node.child[i], d[i]);
+                        n += 1;
+                    }
+                    if n > 0 {
+                        for &e in hit[1..n].iter().rev() {
+                            debug_assert!(sp < stack.len());
+                            if sp < stack.len() {
+                                stack[sp] = e;
+                                sp += 1;
+                            }
+                        }
+                        cur = hit[0].0;
+                        continue;
                     }
                 }
-            } else {
-                let (li, ri) = (node.left(), node.right());
-                let (ln, rn) = (nodes.get(li as usize), nodes.get(ri as usize));
-                let tl = ln.and_then(|n| node_scalar::<T>(&r, &n.aabb()));
-                let tr = rn.and_then(|n| node_scalar::<T>(&r, &n.aabb()));
-                match (ln, tl, rn, tr) {
-                    (Some(ln), Some(tl), Some(rn), Some(tr)) => {
-                        let (near, far, far_t) = if tr < tl { (rn, li, tl) } else { (ln, ri, tr) };
-                        // NOTE: the builder bounds the depth by `STACK_SIZE` (a path of depth
-                        // `d` pushes at most `d - 1` entries), so this always holds.
-                        debug_assert!(sp < STACK_SIZE);
-                        if sp < STACK_SIZE {
-                            stack[sp] = (far, far_t);
-                            sp += 1;
-                        }
-                        node = near;
-                        continue;
-                    }
-                    (Some(ln), Some(_), _, _) => {
-                        node = ln;
-                        continue;
-                    }
-                    (_, _, Some(rn), Some(_)) => {
-                        node = rn;
-                        continue;
-                    }
-                    _ => {}
+            } else if cur != EMPTY_CHILD
+                && let Some(h) = self.trace_instance::<T, L, N, ANY>(blases, cur & !LEAF_BIT, ray, r.tmax)
+            {
+                best = Some(InstanceHit {
+                    hit: h,
+                    instance: cur & !LEAF_BIT,
+                });
+                if ANY {
+                    return best;
                 }
+                r.tmax = h.t;
             }
-            // The next far child that can still hold a closer hit.
+            // The next entry that can still hold a closer hit.
             loop {
                 if sp == 0 {
                     return best;
                 }
                 sp -= 1;
-                let (n, near) = stack[sp];
-                if beyond::<T>(near, r.tmax) {
-                    continue;
-                }
-                if let Some(n) = nodes.get(n as usize) {
-                    node = n;
+                let (c, near) = stack[sp];
+                if !beyond::<T>(near, r.tmax) {
+                    cur = c;
                     break;
                 }
             }
