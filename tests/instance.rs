@@ -386,3 +386,32 @@ fn secondary_rays_from_offset_hit_points_do_not_hit_their_own_triangle() {
     }
     assert!(checked > 1000, "{checked}");
 }
+
+#[test]
+fn one_triangle_blas_and_one_instance() {
+    // The smallest trees: a BLAS of one triangle (a wide root with one leaf child), one instance
+    // (a TLAS root with one leaf child).
+    let tri = [[
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+    ]];
+    let (b2, _) = Bvh2::build(&tri[..], &BuildParams::default()).unwrap();
+    let b8 = [BvhWide::<strahl::math::f32x8, 8>::from_bvh2(&b2, &tri[..]).unwrap()];
+    let m = Affine3A::from_scale_rotation_translation(
+        Vec3::splat(2.0),
+        Quat::from_rotation_y(0.5),
+        Vec3::new(1.0, 2.0, 3.0),
+    );
+    let tlas = Tlas::build(&[Instance::new(m, 0)], &b8).unwrap();
+    assert_eq!(tlas.left_out(), 0);
+    let target = m.transform_point3(Vec3::new(0.0, -0.2, 0.0));
+    let o = Vec3::new(1.0, 2.0, -10.0);
+    let h = tlas
+        .intersect::<Watertight, _, 8>(&b8, &Ray::new(o, target - o))
+        .unwrap();
+    assert_eq!((h.instance, h.hit.prim), (0, 0));
+    assert!((h.hit.t - 1.0).abs() < 1e-5, "{h:?}");
+    assert!(tlas.occluded::<Watertight, _, 8>(&b8, &Ray::with_range(o, target - o, 0.0, 1.01)));
+    assert!(!tlas.occluded::<Watertight, _, 8>(&b8, &Ray::with_range(o, target - o, 0.0, 0.99)));
+}
