@@ -1,6 +1,6 @@
 //! Instancing: a two-level BVH. Each [`Instance`] places one bottom-level tree (a [`BvhWide`],
 //! the BLAS, built once in its object space) in the world by an affine transform; a [`Tlas`] is a
-//! binary BVH over the instances' world boxes. A ray walks the TLAS in world space; at each
+//! 4-wide BVH over the instances' world boxes. A ray walks the TLAS in world space; at each
 //! instance it is taken into object space by the instance's inverse transform and traced through
 //! the BLAS with the same wide traversal as any other tree ([`traverse::wide`](crate::traverse::wide)),
 //! as Embree's and tinybvh's instances work.
@@ -105,7 +105,7 @@ pub struct InstanceHit {
     pub instance: u32,
 }
 
-/// The top level of a two-level BVH: a binary BVH over instances' world boxes, with each
+/// The top level of a two-level BVH: a 4-wide BVH over instances' world boxes, with each
 /// instance's inverse transform (see the [module docs](self)).
 ///
 /// ```
@@ -360,8 +360,8 @@ impl Tlas {
         self.bvh.nodes.is_empty()
     }
 
-    /// The binary BVH over the instances' world boxes (its primitive indices are instance
-    /// indices).
+    /// The binary BVH over the instances' world boxes that the 4-wide nodes were collapsed from
+    /// (one instance per leaf; its primitive indices are instance indices).
     ///
     /// ```
     /// use strahl::{Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}};
