@@ -306,11 +306,7 @@ impl<'d> Scene<'d> {
     /// Any hit in `[tmin, tmax]`.
     #[inline]
     pub fn occluded1(&self, r: &Ray) -> bool {
-        let mut ray = Self::ray(r);
-        let mut ctx = context();
-        // SAFETY: as in `intersect1`.
-        unsafe { rtcOccluded1(self.scene, &mut ctx, &mut ray) };
-        ray.tfar == f32::NEG_INFINITY
+        occluded1(self.scene, r)
     }
 
     /// Eight rays as one packet: `(t, primitive)` per lane.
@@ -385,11 +381,7 @@ impl<'d> InstanceScene<'d> {
     /// Any hit in `[tmin, tmax]`.
     #[inline]
     pub fn occluded1(&self, r: &Ray) -> bool {
-        let mut ray = Scene::ray(r);
-        let mut ctx = context();
-        // SAFETY: as in `intersect1`.
-        unsafe { rtcOccluded1(self.scene, &mut ctx, &mut ray) };
-        ray.tfar == f32::NEG_INFINITY
+        occluded1(self.scene, r)
     }
 }
 
@@ -419,6 +411,16 @@ fn intersect1(scene: RTCScene, r: &Ray) -> Option<(f32, u32)> {
     // `scene` is a live, committed scene (the callers hold it).
     unsafe { rtcIntersect1(scene, &mut ctx, &mut rh) };
     (rh.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((rh.ray.tfar, rh.hit.prim_id))
+}
+
+/// `rtcOccluded1` on a committed scene: any hit in `[tmin, tmax]`.
+#[inline]
+fn occluded1(scene: RTCScene, r: &Ray) -> bool {
+    let mut ray = Scene::ray(r);
+    let mut ctx = context();
+    // SAFETY: as in `intersect1`.
+    unsafe { rtcOccluded1(scene, &mut ctx, &mut ray) };
+    ray.tfar == f32::NEG_INFINITY
 }
 
 /// A dynamic scene of one triangle mesh whose geometry is refitted on every commit: the scene at
