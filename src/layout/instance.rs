@@ -1,53 +1,4 @@
-//! Instancing: a two-level BVH. Each [`Instance`] places one bottom-level tree (a [`BvhWide`],
-//! the BLAS, built once in its object space) in the world by an affine transform; a [`Tlas`] is a
-//! 4-wide BVH over the instances' world boxes. A ray walks the TLAS in world space; at each
-//! instance it is taken into object space by the instance's inverse transform and traced through
-//! the BLAS with the same wide traversal as any other tree ([`traverse::wide`](crate::traverse::wide)),
-//! as Embree's and tinybvh's instances work.
-//!
-//! The object-space ray keeps its parameterisation (`o' = M^-1 o`, `d' = M^-1 d`, not
-//! normalised), so a hit's `t` is the same number in both spaces and the closest hit over all
-//! instances is the smallest `t`, with `tmax` carried from one instance to the next.
-//!
-//! - **Build** ([`Tlas::build`]): each instance's world box is the BLAS's root box through the
-//!   transform (centre and half extent, `|M| e`), padded by `2^-16` of its size and distance
-//!   from the origin against the rounding of the transform; then a full-sweep SAH BVH2 over those
-//!   boxes with one instance per leaf ([`BuildParams::quality`]: a TLAS holds few boxes, and it
-//!   is rebuilt, not refitted, when instances move), collapsed greedily (largest child opened
-//!   first) into 4-wide nodes whose child boxes sit in SoA lanes for the x4 slab test.
-//! - **Bad input**: an instance whose transform is not finite or not invertible (`|det M|` not
-//!   a normal float), whose BLAS index is out of range, or whose BLAS is empty is left out (never
-//!   hit) and counted in [`Tlas::left_out`]. Rays follow the crate's policy (NaN, infinite or
-//!   zero-direction rays hit nothing); an object-space ray that its transform makes invalid (a
-//!   direction flushed to zero) hits nothing in that instance.
-//! - **Ties**: where two instances are hit at exactly the same `t`, the one found first wins
-//!   (the TLAS's near-to-far order); within one BLAS, the wide traversal's rule.
-//! - **Accuracy**: hits are those of a trace of the object-space ray through each instance's BLAS
-//!   (bit for bit, `tests/instance.rs`); against the triangles transformed into the world, `t`
-//!   differs by the transform's rounding (relative 1e-5 in the tests). Rays that start far from
-//!   an instance (more than about 10^4 times its size) see the rounding of `M^-1 o` grow with the
-//!   distance and may be culled by the padded world box where the object-space trace would graze
-//!   the instance.
-//!
-//! ```
-//! use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
-//! use strahl::glam::{Affine3A, Quat};
-//! let tris = strahl::scene::icosphere(2).to_soup();
-//! let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
-//! let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
-//! // Two spheres: one of radius 2 at x = 10, one of radius 1 at x = 20.
-//! let instances = [
-//!     Instance::new(Affine3A::from_scale_rotation_translation(Vec3::splat(2.0), Quat::IDENTITY, Vec3::new(10.0, 0.0, 0.0)), 0),
-//!     Instance::new(Affine3A::from_translation(Vec3::new(20.0, 0.0, 0.0)), 0),
-//! ];
-//! let tlas = Tlas::build(&instances, &blases).unwrap();
-//! let hit = tlas.intersect::<Moller, _, 8>(&blases, &Ray::new(Vec3::ZERO, Vec3::X)).unwrap();
-//! assert_eq!(hit.instance, 0);
-//! assert!((hit.hit.t - 8.0).abs() < 0.05); // the first sphere's surface, at about x = 8
-//! let past = Ray::new(Vec3::new(15.0, 0.0, 0.0), Vec3::X);
-//! assert_eq!(tlas.intersect::<Moller, _, 8>(&blases, &past).unwrap().instance, 1);
-//! assert!(!tlas.occluded::<Moller, _, 8>(&blases, &Ray::new(Vec3::ZERO, -Vec3::X)));
-//! ```
+//! Instancing: [`Tlas`] over [`Instance`]s of wide BVHs (the docs are on [`Tlas`]).
 
 use crate::build::{BuildError, BuildParams, Bvh2};
 use crate::geometry::{Aabb, Hit, Ray};
@@ -105,8 +56,58 @@ pub struct InstanceHit {
     pub instance: u32,
 }
 
-/// The top level of a two-level BVH: a 4-wide BVH over instances' world boxes, with each
-/// instance's inverse transform (see the [module docs](self)).
+/// Instancing: a two-level BVH. Each [`Instance`] places one bottom-level tree (a [`BvhWide`],
+/// the BLAS, built once in its object space) in the world by an affine transform; a [`Tlas`] is a
+/// 4-wide BVH over the instances' world boxes. A ray walks the TLAS in world space; at each
+/// instance it is taken into object space by the instance's inverse transform and traced through
+/// the BLAS with the same wide traversal as any other tree ([`traverse::wide`](crate::traverse::wide)),
+/// as Embree's and tinybvh's instances work.
+///
+/// The object-space ray keeps its parameterisation (`o' = M^-1 o`, `d' = M^-1 d`, not
+/// normalised), so a hit's `t` is the same number in both spaces and the closest hit over all
+/// instances is the smallest `t`, with `tmax` carried from one instance to the next.
+///
+/// - **Build** ([`Tlas::build`]): each instance's world box is the BLAS's root box through the
+///   transform (centre and half extent, `|M| e`), padded by `2^-16` of its size and distance
+///   from the origin against the rounding of the transform; then a full-sweep SAH BVH2 over those
+///   boxes with one instance per leaf ([`BuildParams::quality`]: a TLAS holds few boxes, and it
+///   is rebuilt, not refitted, when instances move), collapsed greedily (largest child opened
+///   first) into 4-wide nodes whose child boxes sit in SoA lanes for the x4 slab test.
+/// - **Bad input**: an instance whose transform is not finite or not invertible (`|det M|` not
+///   a normal float), whose BLAS index is out of range, or whose BLAS is empty is left out (never
+///   hit) and counted in [`Tlas::left_out`]. Rays follow the crate's policy (NaN, infinite or
+///   zero-direction rays hit nothing); an object-space ray that its transform makes invalid (a
+///   direction flushed to zero) hits nothing in that instance.
+/// - **Ties**: where two instances are hit at exactly the same `t`, the one found first wins
+///   (the TLAS's near-to-far order); within one BLAS, the wide traversal's rule.
+/// - **Accuracy**: hits are those of a trace of the object-space ray through each instance's BLAS
+///   (bit for bit, `tests/instance.rs`); against the triangles transformed into the world, `t`
+///   differs by the transform's rounding (relative 1e-5 in the tests). Rays that start far from
+///   an instance (more than about 10^4 times its size) see the rounding of `M^-1 o` grow with the
+///   distance and may be culled by the padded world box where the object-space trace would graze
+///   the instance.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+/// use strahl::glam::{Affine3A, Quat};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+/// // Two spheres: one of radius 2 at x = 10, one of radius 1 at x = 20.
+/// let instances = [
+///     Instance::new(Affine3A::from_scale_rotation_translation(Vec3::splat(2.0), Quat::IDENTITY, Vec3::new(10.0, 0.0, 0.0)), 0),
+///     Instance::new(Affine3A::from_translation(Vec3::new(20.0, 0.0, 0.0)), 0),
+/// ];
+/// let tlas = Tlas::build(&instances, &blases).unwrap();
+/// let hit = tlas.intersect::<Moller, _, 8>(&blases, &Ray::new(Vec3::ZERO, Vec3::X)).unwrap();
+/// assert_eq!(hit.instance, 0);
+/// assert!((hit.hit.t - 8.0).abs() < 0.05); // the first sphere's surface, at about x = 8
+/// let past = Ray::new(Vec3::new(15.0, 0.0, 0.0), Vec3::X);
+/// assert_eq!(tlas.intersect::<Moller, _, 8>(&blases, &past).unwrap().instance, 1);
+/// assert!(!tlas.occluded::<Moller, _, 8>(&blases, &Ray::new(Vec3::ZERO, -Vec3::X)));
+/// ```
+///
+/// A row of spheres:
 ///
 /// ```
 /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh4, Instance, Tlas}, traverse::Watertight};

@@ -28,7 +28,7 @@
 //! # Instances
 //! [`Tlas`] is the top level of a two-level BVH: [`Instance`]s place wide trees (BLASes) in the
 //! world by affine transforms; rays are traced into each instance's object space (see
-//! [`Tlas`]'s module, `instance.rs`).
+//! [`Tlas`]).
 
 //! # Layout
 //! ```text
