@@ -9,7 +9,7 @@ use strahl::geometry::{Hit, Triangle};
 use strahl::layout::{BvhWide, Instance, InstanceHit, Tlas};
 use strahl::math::Lane;
 use strahl::scene::{self, Rng};
-use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_brute_force};
+use strahl::traverse::{Fast, Moller, TriangleTest, Watertight, intersect_brute_force};
 use strahl::{Ray, Vec3};
 
 /// The bottom-level meshes: the bunny, an icosphere and a clustered soup.
@@ -169,6 +169,11 @@ fn check<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], rays: &[R
             want.is_some(),
             "{what}: occluded {ray:?}"
         );
+        // The fast slab test only misses: a hit it reports is never closer than the exact one.
+        if let Some(f) = tlas8.intersect::<Fast<T>, _, 8>(&b8, ray) {
+            let w = want.unwrap_or_else(|| panic!("{what}: fast {f:?}, reference none"));
+            assert!(f.hit.t >= w.hit.t, "{what}: fast {f:?} before {w:?}");
+        }
         hits += usize::from(want.is_some());
     }
     // The batch forms, on one thread and on three, answer as one call per ray.
