@@ -55,7 +55,7 @@ mod node;
 #[cfg(feature = "alloc")]
 pub mod order;
 pub mod packet;
-mod stack;
+pub(crate) mod stack;
 pub mod wide;
 
 pub use brute::{intersect_brute_force, occluded_brute_force};
