@@ -600,7 +600,10 @@ impl Tlas {
                         let i = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
                         let mut j = n;
-                        while j > 0 && hit[j - 1].1 > d[i] {
+                        // Any hit: slot order, no sort (as the wide any-hit walk). PERF: taking
+                        // turns with the sorted order, diffuse any-hit rays 1.02-1.12x faster,
+                        // primary ones the same.
+                        while !ANY && j > 0 && hit[j - 1].1 > d[i] {
                             hit[j] = hit[j - 1];
                             j -= 1;
                         }
