@@ -332,6 +332,17 @@ fn extreme_scales() {
     // Scaled by 1e30: the determinant (1e90) overflows, so the instance is left out.
     let huge = Instance::new(Affine3A::from_scale(Vec3::splat(1e30)), 1);
     assert_eq!(Tlas::build(&[huge], &b8).unwrap().left_out(), 1);
+    // Moved to x = 2e38: its world box's `min + max` overflows, beyond the builders' range; left
+    // out and counted (not dropped silently by the TLAS's builder).
+    for x in [2e38f32, 3e38] {
+        let far = Instance::new(Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)), 1);
+        let tlas = Tlas::build(&[far, Instance::new(Affine3A::IDENTITY, 1)], &b8).unwrap();
+        assert_eq!(
+            (tlas.left_out(), tlas.bvh().prim_indices.as_slice()),
+            (1, &[1u32][..]),
+            "{x}"
+        );
+    }
     // By 1e12 and 1e-12: usable, and hit where the scaled sphere (radius about 1) lies.
     for s in [1e12f32, 1e-12] {
         let inst = Instance::new(Affine3A::from_scale(Vec3::splat(s)), 1);

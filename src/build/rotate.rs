@@ -486,7 +486,10 @@ fn pre_order(bvh: &Bvh2, order: &mut Vec<u32>, depth: &mut [u32]) -> Result<(), 
     if let Some(d) = depth.first_mut() {
         *d = 1;
     }
-    let r = checked_pre_order(&bvh.nodes, bvh.prim_indices.len(), &mut walk, |p, c| {
+    // NOTE: slots unchecked (`usize::MAX`): rotations never read them, and `index_order` (the
+    // other walk of a round) does not check them either, so a later round must not refuse a tree
+    // that round 0 already rotated.
+    let r = checked_pre_order(&bvh.nodes, usize::MAX, &mut walk, |p, c| {
         depth[c as usize] = depth[p as usize] + 1;
     });
     *order = walk.order;

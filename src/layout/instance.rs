@@ -1,6 +1,6 @@
 //! Instancing: [`Tlas`] over [`Instance`]s of wide BVHs (the docs are on [`Tlas`]).
 
-use crate::build::{BuildError, BuildParams, Bvh2};
+use crate::build::{BuildError, BuildParams, Bvh2, usable_box};
 use crate::geometry::{Aabb, Hit, Ray};
 use crate::intersect::AabbLanes;
 use crate::layout::{BvhWide, EMPTY_CHILD, LEAF_BIT};
@@ -75,8 +75,9 @@ pub struct InstanceHit {
 ///   is rebuilt, not refitted, when instances move), collapsed greedily (largest child opened
 ///   first) into 4-wide nodes whose child boxes sit in SoA lanes for the x4 slab test.
 /// - **Bad input**: an instance whose transform is not finite or not invertible (`|det M|` not
-///   a normal float), whose BLAS index is out of range, or whose BLAS is empty is left out (never
-///   hit) and counted in [`Tlas::left_out`]. Rays follow the crate's policy (NaN, infinite or
+///   a normal float), whose BLAS index is out of range, whose BLAS is empty, or whose world box
+///   lies beyond the builders' range (about `±1.7e38`) is left out (never hit) and counted in
+///   [`Tlas::left_out`]. Rays follow the crate's policy (NaN, infinite or
 ///   zero-direction rays hit nothing); an object-space ray that its transform makes invalid (a
 ///   direction flushed to zero) hits nothing in that instance.
 /// - **Ties**: where two instances are hit at exactly the same `t`, the one found first wins
@@ -250,7 +251,9 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     // Scaled before the sum, which could overflow where the box reaches near `f32::MAX`.
     let we = we + we * PAD + wc.abs() * PAD + Vec3A::splat(we.max_element() * PAD);
     let world = Aabb::new((wc - we).into(), (wc + we).into());
-    (world.min.is_finite() && world.max.is_finite()).then_some((world, inv))
+    // The builders' own rule (extent and `min + max` finite), so that every instance the TLAS
+    // leaves out is counted here.
+    usable_box(world.min, world.max).then_some((world, inv))
 }
 
 impl Tlas {
@@ -323,7 +326,8 @@ impl Tlas {
     }
 
     /// Instances left out by [`build`](Self::build): transform not finite or not invertible,
-    /// BLAS index out of range, or an empty BLAS.
+    /// BLAS index out of range, an empty BLAS, or a world box beyond the builders' range (an
+    /// extent or `min + max` that overflows `f32`, i.e. coordinates beyond about `±1.7e38`).
     ///
     /// ```
     /// assert_eq!(strahl::layout::Tlas::default().left_out(), 0);
