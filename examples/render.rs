@@ -128,6 +128,7 @@ impl Tracer for Instanced {
 }
 
 /// Builds a binned-SAH BVH2 of `tris` on `o.threads` and collapses it to BVH8; prints the figures.
+/// `None` (said why) where nothing can be rendered.
 fn build(tris: &[Triangle], o: &Options) -> Option<(Bvh2, Bvh8)> {
     let t0 = Instant::now();
     let (bvh2, stats) = match Bvh2::build_par(tris, &BuildParams::default(), o.threads) {
@@ -151,6 +152,10 @@ fn build(tris: &[Triangle], o: &Options) -> Option<(Bvh2, Bvh8)> {
         bvh2.sah_cost(1.0, 1.0),
         bvh.nodes().len()
     );
+    if bvh.is_empty() {
+        println!("nothing to render");
+        return None;
+    }
     Some((bvh2, bvh))
 }
 
@@ -160,10 +165,6 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
     let Some((bvh2, bvh)) = build(&tris, o) else {
         return;
     };
-    if bvh.is_empty() {
-        println!("nothing to render");
-        return;
-    }
     let bounds = bvh2.bounds();
     shade(name, &Flat { bvh, tris }, &bounds, o);
 }
@@ -181,10 +182,6 @@ fn render_instances(name: &str, mesh: &Mesh, k: usize, o: &Options) {
     let Some((bvh2, blas)) = build(&tris, o) else {
         return;
     };
-    if blas.is_empty() {
-        println!("nothing to render");
-        return;
-    }
     let b = bvh2.bounds();
     let size = (b.max - b.min).max_element();
     let mut rng = Rng::new(11);
