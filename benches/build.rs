@@ -147,6 +147,13 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
         ("median", BuildParams::median()),
         ("binned8-longest (fast)", BuildParams::fast()),
         (
+            "binned8-longest, unsampled",
+            BuildParams {
+                bin_sample: 0,
+                ..BuildParams::fast()
+            },
+        ),
+        (
             "binned8-all",
             BuildParams {
                 bin_axes: BinAxes::All,
@@ -154,6 +161,13 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
             },
         ),
         ("binned16-all (balanced)", BuildParams::balanced()),
+        (
+            "binned16-all, sampled",
+            BuildParams {
+                bin_sample: 4096,
+                ..BuildParams::balanced()
+            },
+        ),
         (
             "binned32-all",
             BuildParams {

@@ -161,6 +161,7 @@ fn params() -> Vec<(String, BuildParams)> {
                 },
             ),
             ("depth34", BuildParams { max_depth: 34, ..b }),
+            ("sample64", BuildParams { bin_sample: 64, ..b }),
             (
                 "m63-norm",
                 BuildParams {

@@ -258,6 +258,34 @@ fn large_scenes_split_wide() {
     );
 }
 
+/// Sampled binning (`BuildParams::bin_sample`, on in `fast()`) in the wide rounds: the sample's
+/// split, the chunks counted and their boxes measured while partitioned, is the sequential
+/// loop's; and where the root's sample misses the one far outlier (every sampled reference in one
+/// bin), both bin every reference.
+#[test]
+fn sampled_splits_in_wide_rounds() {
+    let mut r = Rng::new(12);
+    let mut tris: Vec<Triangle> = (0..100_000)
+        .map(|_| {
+            let p = Vec3::new(r.f32(), r.f32(), r.f32());
+            [p, p + r.unit_vector() * 0.01, p + r.unit_vector() * 0.01]
+        })
+        .collect();
+    let far = Vec3::splat(1e7);
+    tris.push([far, far + Vec3::X, far + Vec3::Y]);
+    let params = [
+        ("fast", BuildParams::fast()),
+        (
+            "balanced_sample1024",
+            BuildParams {
+                bin_sample: 1024,
+                ..BuildParams::balanced()
+            },
+        ),
+    ];
+    check_with("outlier", &tris, &params, &[2, 4], true);
+}
+
 #[test]
 fn small_inputs_take_the_single_threaded_path() {
     let mut builder = Builder::new();

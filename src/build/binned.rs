@@ -12,6 +12,21 @@
 //! references in a row that fall into the same bin do not wait on each other's store (binning
 //! took about 25% fewer profile samples on the 1M soup).
 //!
+//! **Sampled binning** ([`BuildParams::bin_sample`](super::BuildParams::bin_sample), on in
+//! `fast()`): a node of at least `2 S` references bins every `N / S`-th ([`find_sampled`]) and
+//! the partition pass that moves all `N` measures the children's boxes and counts
+//! ([`partition_measured`]). The top levels of a 1M build wait on memory (32 MB of references
+//! read per pass); sampling drops one of their two passes. Where the sample has no plane with
+//! references on both sides (it missed the outliers), the node bins every reference. Measured
+//! (2026-12-05, Intel Xeon, `STRAHL_SCENE=soup|terrain|sphereflake
+//! STRAHL_ONLY=fast_exact,fast,balanced,balanced_sampled STRAHL_REPS=7 cargo test --release
+//! --test build_speed -- --ignored --nocapture speed`, two runs, medians): `fast()` with
+//! `S = 4096` 1.16-1.18x faster on the 1M soup, 1.16-1.20x on the 1M terrain, 1.12-1.19x on the
+//! 1M sphereflake, SAH cost +0.00%, +0.02%, +0.03%; `balanced()` with `S = 4096` 1.22-1.28x
+//! faster, SAH cost +0.01%, +0.19%, +0.72%. Smaller samples cost more tree on multi-scale scenes
+//! (`S = 256`: `balanced()`'s sphereflake +4.3%), since a sample misses the few large primitives
+//! whose boxes decide the bins' areas.
+//!
 //! **Small ranges** (at most [`SMALL`] = 16 references) are split by an exact sweep instead
 //! ([`find_small`]): binning costs about 100 ns per node in bin resets and sweeps, which
 //! dominated the build when half the nodes hold 2 or 3 references. The top-down builder builds
@@ -47,6 +62,7 @@
 use super::params::MAX_BINS;
 use super::prims::{Box8, CBounds, PrimRef};
 use crate::math::{Lane, f32x4, f32x8};
+use alloc::vec::Vec;
 
 const K: usize = MAX_BINS as usize;
 
@@ -100,6 +116,8 @@ impl Binning {
 pub(crate) struct Bins {
     boxes: [[[Box8; K]; 3]; 2],
     counts: [[[u32; K]; 3]; 2],
+    /// The references [`find_sampled`] bins (empty until a node is sampled).
+    sample: Vec<PrimRef>,
 }
 
 impl Bins {
@@ -107,8 +125,42 @@ impl Bins {
         Self {
             boxes: [[[Box8::EMPTY; K]; 3]; 2],
             counts: [[[0; K]; 3]; 2],
+            sample: Vec::new(),
         }
     }
+}
+
+/// The stride of the sampled binning of a node of `count` references
+/// ([`BuildParams::bin_sample`](super::BuildParams::bin_sample) = `sample`), or 1 where every
+/// reference is binned: nodes of at least `2 * sample` references, and only where the node may
+/// not become a leaf (`may_leaf`), bin every `count / sample`-th reference (`sample` to
+/// `2 * sample` of them).
+#[inline]
+pub(crate) fn sample_stride(count: u32, sample: u32, may_leaf: bool) -> usize {
+    if sample == 0 || may_leaf || (count as u64) < 2 * sample as u64 {
+        1
+    } else {
+        (count / sample) as usize
+    }
+}
+
+/// [`find`] over every `stride`-th reference of `refs` (the first included). The split's counts
+/// and boxes are the sample's: [`partition_measured`] gives the node's. `None` also where the
+/// sample has no plane with references on both sides (the caller then bins every reference).
+pub(crate) fn find_sampled(
+    refs: &[PrimRef],
+    binning: &Binning,
+    bins: usize,
+    longest_only: bool,
+    stride: usize,
+    scratch: &mut Bins,
+) -> Option<BinSplit> {
+    let mut sample = core::mem::take(&mut scratch.sample);
+    sample.clear();
+    sample.extend(refs.iter().step_by(stride.max(1)).copied());
+    let found = find(&sample, binning, bins, longest_only, scratch);
+    scratch.sample = sample;
+    found
 }
 
 /// The best plane found by [`find`]: refs whose bin on `axis` is `<= plane` go left.
@@ -160,6 +212,7 @@ fn bin_refs<const AXES: u32>(refs: &[PrimRef], binning: &Binning, bins: usize, s
     let Bins {
         boxes: sets,
         counts: set_counts,
+        ..
     } = scratch;
     for set in 0..2 {
         for a in 0..3 {
@@ -384,19 +437,82 @@ fn partition_axis<const A: usize>(
         lacc = m.select(cc, ninf).max_l(lacc);
         racc = m.select(ninf, cc).max_l(racc);
     }
-    let side = |acc: f32x8| {
-        let [nlo, hi]: [f32x4; 2] = bytemuck::cast(acc);
-        CBounds { lo: -nlo, hi }
-    };
-    (l, side(lacc), side(racc))
+    (l, cbounds_of(lacc), cbounds_of(racc))
+}
+
+/// [`partition_into`] that also grows both sides' boxes (for a split found on a sample, whose
+/// boxes and counts are the sample's): returns the left count, both sides' centroid bounds and
+/// both sides' boxes.
+pub(crate) fn partition_measured(
+    src: &[PrimRef],
+    dst: &mut [PrimRef],
+    binning: &Binning,
+    split: &BinSplit,
+) -> (usize, CBounds, CBounds, Box8, Box8) {
+    match split.axis {
+        0 => partition_measured_axis::<0>(src, dst, binning, split.plane),
+        1 => partition_measured_axis::<1>(src, dst, binning, split.plane),
+        _ => partition_measured_axis::<2>(src, dst, binning, split.plane),
+    }
+}
+
+/// [`partition_axis`] with the sides' boxes grown too (two more selects and `max`es per
+/// reference: free on the top levels this runs on, whose pass waits on memory).
+#[inline(never)]
+fn partition_measured_axis<const A: usize>(
+    src: &[PrimRef],
+    dst: &mut [PrimRef],
+    binning: &Binning,
+    plane: usize,
+) -> (usize, CBounds, CBounds, Box8, Box8) {
+    let n = src.len().min(dst.len());
+    let (origin, scale) = (binning.origin.to_array()[A], binning.scale.to_array()[A]);
+    let limit = (plane + 1) as f32;
+    let (mut l, mut r) = (0usize, n);
+    let ninf = f32x8::splat(f32::NEG_INFINITY);
+    let (mut lacc, mut racc) = (ninf, ninf);
+    let (mut lbox, mut rbox) = (ninf, ninf);
+    for x in &src[..n] {
+        let c = x.c2();
+        // The side test of `partition_axis`.
+        let right = (c.to_array()[A] - origin) * scale >= limit;
+        let left = !right;
+        // While refs remain, `l < r`: both slots are in range. One of the two writes is kept.
+        dst[l] = *x;
+        dst[r - 1] = *x;
+        l += left as usize;
+        r -= !left as usize;
+        let cc: f32x8 = bytemuck::cast([-c, c]);
+        let bb = x.bounds().0;
+        let m = f32x8::splat(f32::from_bits(0u32.wrapping_sub(left as u32)));
+        lacc = m.select(cc, ninf).max_l(lacc);
+        racc = m.select(ninf, cc).max_l(racc);
+        lbox = m.select(bb, ninf).max_l(lbox);
+        rbox = m.select(ninf, bb).max_l(rbox);
+    }
+    (l, cbounds_of(lacc), cbounds_of(racc), Box8(lbox), Box8(rbox))
+}
+
+/// How many of `refs` go left of `split` (the side test of [`partition_into`]).
+#[cfg(feature = "std")]
+pub(crate) fn count_left(refs: &[PrimRef], binning: &Binning, split: &BinSplit) -> usize {
+    let a = split.axis.min(2);
+    let (origin, scale) = (binning.origin.to_array()[a], binning.scale.to_array()[a]);
+    let limit = (split.plane + 1) as f32;
+    // Everything but `q >= limit` goes left (a NaN `q` too).
+    let right = refs
+        .iter()
+        .filter(|x| (x.c2().to_array()[a] - origin) * scale >= limit)
+        .count();
+    refs.len() - right
 }
 
 /// [`partition_into`] for one chunk of a node's references (the parallel build partitions a
 /// large node in chunks, one per thread): the chunk's left references go, in order, to `left`,
 /// its right ones, the first last, to `right` from its end. With the chunks' pieces laid out as
 /// `[L_0, L_1, .., L_k, R_k, .., R_1, R_0]` the node's order is exactly [`partition_into`]'s.
-/// Returns the two sides' centroid bounds in the negated-min form (`[-lo, hi]`, grown by `max`),
-/// or `None` where the pieces' lengths do not match the chunk's sides (nothing is then to be
+/// Returns the two sides' centroid bounds and boxes in the negated-min form (`[-lo, hi]`, grown
+/// by `max`: left, right centroid bounds, left, right boxes), or `None` where the pieces' lengths do not match the chunk's sides (nothing is then to be
 /// trusted in them; the caller splits the node the sequential way, from the untouched `src`).
 #[cfg(feature = "std")]
 pub(crate) fn partition_chunk(
@@ -405,7 +521,7 @@ pub(crate) fn partition_chunk(
     right: &mut [PrimRef],
     binning: &Binning,
     split: &BinSplit,
-) -> Option<(f32x8, f32x8)> {
+) -> Option<[f32x8; 4]> {
     match split.axis {
         0 => partition_chunk_axis::<0>(src, left, right, binning, split.plane),
         1 => partition_chunk_axis::<1>(src, left, right, binning, split.plane),
@@ -420,12 +536,13 @@ fn partition_chunk_axis<const A: usize>(
     right: &mut [PrimRef],
     binning: &Binning,
     plane: usize,
-) -> Option<(f32x8, f32x8)> {
+) -> Option<[f32x8; 4]> {
     let (origin, scale) = (binning.origin.to_array()[A], binning.scale.to_array()[A]);
     let limit = (plane + 1) as f32;
     let (mut l, mut r) = (0usize, right.len());
     let ninf = f32x8::splat(f32::NEG_INFINITY);
     let (mut lacc, mut racc) = (ninf, ninf);
+    let (mut lbox, mut rbox) = (ninf, ninf);
     // NOTE: a branch per reference (two separate destination slices leave no room for the
     // sequential pass's write-to-both trick); this runs only on the top levels of a parallel
     // build, where the pass is bound by memory traffic.
@@ -437,17 +554,18 @@ fn partition_chunk_axis<const A: usize>(
             r = r.checked_sub(1)?;
             *right.get_mut(r)? = *x;
             racc = cc.max_l(racc);
+            rbox = x.bounds().0.max_l(rbox);
         } else {
             *left.get_mut(l)? = *x;
             l += 1;
             lacc = cc.max_l(lacc);
+            lbox = x.bounds().0.max_l(lbox);
         }
     }
-    (l == left.len() && r == 0).then_some((lacc, racc))
+    (l == left.len() && r == 0).then_some([lacc, racc, lbox, rbox])
 }
 
-/// Centroid bounds from the negated-min form of [`partition_chunk`].
-#[cfg(feature = "std")]
+/// Centroid bounds from the negated-min form (`[-lo, hi]`, grown by `max`).
 pub(crate) fn cbounds_of(acc: f32x8) -> CBounds {
     let [nlo, hi]: [f32x4; 2] = bytemuck::cast(acc);
     CBounds { lo: -nlo, hi }

@@ -319,8 +319,8 @@ pub use builder::Builder;
 #[cfg(feature = "std")]
 pub use builder::MAX_THREADS;
 pub use params::{
-    BinAxes, BuildParams, MAX_BINS, MAX_CLUSTER_SIZE, MAX_LEAF_SIZE, MIN_BINS, MIN_DEPTH, MortonBits, MortonCells,
-    Refine, Strategy, TreeletParams,
+    BinAxes, BuildParams, MAX_BINS, MAX_CLUSTER_SIZE, MAX_LEAF_SIZE, MIN_BIN_SAMPLE, MIN_BINS, MIN_DEPTH, MortonBits,
+    MortonCells, Refine, Strategy, TreeletParams,
 };
 pub(crate) use prims::usable_box;
 pub use prims::{MAX_PRIMITIVES, Primitives};

@@ -274,6 +274,16 @@ pub struct BuildParams {
     pub bins: u32,
     /// Axes binned by [`Strategy::BinnedSah`].
     pub bin_axes: BinAxes,
+    /// Sampled binning of large nodes ([`Strategy::BinnedSah`], and the binned-SAH tops and
+    /// mini-trees of the HLBVH strategies): a node of at least `2 * bin_sample` references that
+    /// may not be a leaf bins only every `k`-th of them, `k = N / bin_sample` (so `bin_sample` to
+    /// `2 * bin_sample` references), and the pass that partitions all `N` by the plane found
+    /// measures the children's counts and boxes. The top levels of a large build, which wait on
+    /// memory, then read the references once per level instead of twice. The plane is the
+    /// sample's cheapest, not always the node's; where no plane of the sample has references on
+    /// both sides, every reference is binned. `0` (every preset but [`fast`](Self::fast)) bins
+    /// every reference, as Wald 2007 does; else at least [`MIN_BIN_SAMPLE`].
+    pub bin_sample: u32,
     /// Code width of [`Strategy::Lbvh`] (and of the other Morton-code builders).
     pub morton_bits: MortonBits,
     /// Cell shape of the Morton grid of the Morton-code builders.
@@ -306,6 +316,17 @@ pub struct BuildParams {
 /// assert!(BuildParams { cluster_size: MAX_CLUSTER_SIZE + 1, ..p }.check().is_err());
 /// ```
 pub const MAX_CLUSTER_SIZE: u32 = 1 << 16;
+
+/// Smallest non-zero [`BuildParams::bin_sample`].
+///
+/// ```
+/// use strahl::build::{BuildParams, MIN_BIN_SAMPLE};
+/// let p = BuildParams { bin_sample: MIN_BIN_SAMPLE, ..BuildParams::balanced() };
+/// assert!(p.check().is_ok());
+/// assert!(BuildParams { bin_sample: MIN_BIN_SAMPLE - 1, ..p }.check().is_err());
+/// assert!(BuildParams { bin_sample: 0, ..p }.check().is_ok()); // every reference binned
+/// ```
+pub const MIN_BIN_SAMPLE: u32 = 64;
 
 /// Fewest bins per axis of the binned builder.
 ///
@@ -393,6 +414,7 @@ impl BuildParams {
             max_leaf_size: 4,
             bins: 8,
             bin_axes: BinAxes::All,
+            bin_sample: 0,
             morton_bits: MortonBits::Bits30,
             morton_cells: MortonCells::Extended,
             max_depth: MAX_DEPTH,
@@ -418,6 +440,7 @@ impl BuildParams {
             strategy: Strategy::BinnedSah,
             bins: 8,
             bin_axes: BinAxes::Longest,
+            bin_sample: 4096,
             min_leaf_size: 1,
             max_leaf_size: 8,
             ..Self::fastest()
@@ -437,6 +460,7 @@ impl BuildParams {
         Self {
             bins: 16,
             bin_axes: BinAxes::All,
+            bin_sample: 0,
             ..Self::fast()
         }
     }
@@ -636,6 +660,9 @@ impl BuildParams {
         }
         if !(MIN_BINS..=MAX_BINS).contains(&self.bins) {
             return bad("bins must be in 4 ..= 64");
+        }
+        if self.bin_sample != 0 && self.bin_sample < MIN_BIN_SAMPLE {
+            return bad("bin_sample must be 0 or >= 64");
         }
         if !(MIN_DEPTH..=MAX_DEPTH).contains(&self.max_depth) {
             return bad("max_depth must be in 34 ..= traverse::MAX_DEPTH");

@@ -206,6 +206,8 @@ fn split_wide(
     }
     let total: usize = tasks.iter().map(|t| (t.end - t.begin) as usize).sum();
     // Per task: its binning, axes, chunk length and first chunk (in `pool`).
+    // `sampled`: the split found on a sample of the task (`BuildParams::bin_sample`), whose
+    // chunks are then counted, not binned.
     struct Plan {
         binning: Binning,
         nb: usize,
@@ -213,9 +215,11 @@ fn split_wide(
         chunk: usize,
         first: usize,
         chunks: usize,
+        sampled: Option<binned::BinSplit>,
     }
     let mut plans = Vec::with_capacity(tasks.len());
     let mut chunks_total = 0;
+    let mut sampler: Option<Bins> = None;
     for t in &tasks {
         let count = (t.end - t.begin) as usize;
         let nb = p.bins.min(t.end - t.begin);
@@ -226,13 +230,26 @@ fn split_wide(
         let chunk = count.div_ceil(k);
         let chunks = count.div_ceil(chunk.max(1));
         let ok = count as u32 > p.min_leaf_size && !binning.is_flat() && chunks >= 2;
+        // The sequential loop's sampled split, from the same sample.
+        let may_leaf = count as u32 <= p.max_leaf_size;
+        let stride = binned::sample_stride(count as u32, p.bin_sample, may_leaf);
+        let longest = p.bin_axes == BinAxes::Longest;
+        let sampled = (ok && stride > 1)
+            .then(|| {
+                let holder = if t.in_alt { &alt[..] } else { &refs[..] };
+                let src = &holder[t.begin as usize..t.end as usize];
+                let scratch = sampler.get_or_insert_with(Bins::new);
+                binned::find_sampled(src, &binning, nb as usize, longest, stride, scratch)
+            })
+            .flatten();
         plans.push(ok.then(|| Plan {
-            mask: binned::axes_mask(&binning, p.bin_axes == BinAxes::Longest),
+            mask: binned::axes_mask(&binning, longest),
             binning,
             nb: nb as usize,
             chunk,
             first: chunks_total,
             chunks,
+            sampled,
         }));
         if ok {
             chunks_total += chunks;
@@ -247,47 +264,73 @@ fn split_wide(
         .zip(&tasks)
         .map(|((r, a), t)| if t.in_alt { (a, r) } else { (r, a) })
         .collect();
-    // Pass 1: every chunk binned, side by side.
+    // Pass 1: every chunk binned (or, for a sampled split, its left references counted), side by
+    // side.
     let (bins_of_chunks, total_bins) = pool.split_at_mut(chunks_total);
+    let counted: Vec<AtomicUsize> = (0..chunks_total).map(|_| AtomicUsize::new(0)).collect();
     {
-        type BinJob<'a> = (&'a [PrimRef], &'a Plan, &'a mut Bins);
+        type BinJob<'a> = (&'a [PrimRef], &'a Plan, &'a mut Bins, &'a AtomicUsize);
         let mut jobs: Vec<Mutex<Option<BinJob<'_>>>> = Vec::with_capacity(chunks_total);
         let mut bins_left = &mut bins_of_chunks[..];
         for (plan, (src, _)) in plans.iter().zip(&parts) {
             let Some(plan) = plan else { continue };
             let (mine, rest) = core::mem::take(&mut bins_left).split_at_mut(plan.chunks);
             bins_left = rest;
-            for (ch, b) in src.chunks(plan.chunk).zip(mine) {
-                jobs.push(Mutex::new(Some((ch, plan, b))));
+            let slots = &counted[plan.first..plan.first + plan.chunks];
+            for ((ch, b), slot) in src.chunks(plan.chunk).zip(mine).zip(slots) {
+                jobs.push(Mutex::new(Some((ch, plan, b, slot))));
             }
         }
         let next = AtomicUsize::new(0);
         crate::par::each(0..threads.min(jobs.len()), |_| {
             while let Some(job) = jobs.get(next.fetch_add(1, Ordering::Relaxed)) {
-                if let Some((ch, plan, b)) = job.lock().ok().and_then(|mut g| g.take()) {
-                    binned::bin_chunk(ch, &plan.binning, plan.nb, plan.mask, b);
+                if let Some((ch, plan, b, slot)) = job.lock().ok().and_then(|mut g| g.take()) {
+                    match &plan.sampled {
+                        Some(s) => slot.store(binned::count_left(ch, &plan.binning, s), Ordering::Relaxed),
+                        None => binned::bin_chunk(ch, &plan.binning, plan.nb, plan.mask, b),
+                    }
                 }
             }
         });
     }
-    // The splits, from the merged bins, and the checks of the sequential loop.
+    // The splits, from the merged bins (or the sample), and the checks of the sequential loop;
+    // each chunk's left count.
     let all = &mut total_bins[0];
     let mut splits: Vec<Option<binned::BinSplit>> = Vec::with_capacity(tasks.len());
+    let mut chunk_lefts = alloc::vec![0usize; chunks_total];
     for (t, plan) in tasks.iter().zip(&plans) {
         let split = plan.as_ref().and_then(|plan| {
             let mine = &bins_of_chunks[plan.first..plan.first + plan.chunks];
-            binned::sum_bins(all, mine, plan.nb, plan.mask);
-            let s = binned::sweep_bins(all, &plan.binning, plan.nb, plan.mask)?;
+            let lefts = &mut chunk_lefts[plan.first..plan.first + plan.chunks];
             let count = t.end - t.begin;
-            let leaf_cost = p.intersection_cost * count as f32;
-            if count <= p.max_leaf_size && leaf_cost <= split_cost(p, s.cost, t.bounds.half_area_nonempty(), count) {
-                return None;
-            }
+            let mut s = if let Some(s) = plan.sampled {
+                for (l, c) in lefts.iter_mut().zip(&counted[plan.first..]) {
+                    *l = c.load(Ordering::Relaxed);
+                }
+                // The sample's counts and boxes: the node's come from the chunks.
+                binned::BinSplit {
+                    left_count: lefts.iter().sum::<usize>().min(count as usize) as u32,
+                    ..s
+                }
+            } else {
+                binned::sum_bins(all, mine, plan.nb, plan.mask);
+                let s = binned::sweep_bins(all, &plan.binning, plan.nb, plan.mask)?;
+                let leaf_cost = p.intersection_cost * count as f32;
+                if count <= p.max_leaf_size && leaf_cost <= split_cost(p, s.cost, t.bounds.half_area_nonempty(), count)
+                {
+                    return None;
+                }
+                for (l, b) in lefts.iter_mut().zip(mine) {
+                    *l = binned::left_count(b, &s);
+                }
+                s
+            };
             let (nl, nr) = (s.left_count, count - s.left_count.min(count));
             // NOTE: equal to `nl` (the bins were summed from these); checked because the pieces
             // below are cut by it.
-            let lefts: usize = mine.iter().map(|b| binned::left_count(b, &s)).sum();
-            (nl > 0 && nr > 0 && lefts == nl as usize && depth_ok(t.depth, nl, nr, p.max_depth)).then_some(s)
+            let sum: usize = lefts.iter().sum();
+            s.left_count = nl;
+            (nl > 0 && nr > 0 && sum == nl as usize && depth_ok(t.depth, nl, nr, p.max_depth)).then_some(s)
         });
         splits.push(split);
     }
@@ -305,18 +348,17 @@ fn split_wide(
         let (Some(plan), Some(split)) = (plan, split) else {
             continue;
         };
-        let mine = &bins_of_chunks[plan.first..plan.first + plan.chunks];
+        let lefts = &chunk_lefts[plan.first..plan.first + plan.chunks];
         let (mut lpart, mut rpart) = dst.split_at_mut(split.left_count as usize);
         let mut pieces: Vec<(&mut [PrimRef], &mut [PrimRef])> = Vec::with_capacity(plan.chunks);
-        for b in mine {
-            let nl = binned::left_count(b, split);
+        for &nl in lefts {
             let (l, rest) = core::mem::take(&mut lpart).split_at_mut(nl);
             lpart = rest;
             pieces.push((l, &mut []));
         }
         // The right pieces from the back: chunk 0's at the end.
-        for ((ch, b), piece) in src.chunks(plan.chunk).zip(mine).zip(pieces.iter_mut()).rev() {
-            let nr = ch.len() - binned::left_count(b, split);
+        for ((ch, &nl), piece) in src.chunks(plan.chunk).zip(lefts).zip(pieces.iter_mut()).rev() {
+            let nr = ch.len() - nl;
             let (r, rest) = core::mem::take(&mut rpart).split_at_mut(nr);
             rpart = rest;
             piece.1 = r;
@@ -326,7 +368,7 @@ fn split_wide(
             job_task.push(i);
         }
     }
-    let results: Vec<Mutex<Option<(f32x8, f32x8)>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
+    let results: Vec<Mutex<Option<[f32x8; 4]>>> = (0..jobs.len()).map(|_| Mutex::new(None)).collect();
     {
         let next = AtomicUsize::new(0);
         crate::par::each(0..threads.min(jobs.len()), |_| {
@@ -343,19 +385,23 @@ fn split_wide(
         });
     }
     drop(jobs);
-    // Per task, the chunks' centroid bounds merged (`None`: a chunk failed).
+    // Per task, the chunks' centroid bounds and boxes merged (`None`: a chunk failed).
     let ninf = f32x8::splat(f32::NEG_INFINITY);
-    let mut acc: Vec<Option<(f32x8, f32x8)>> = splits.iter().map(|s| s.map(|_| (ninf, ninf))).collect();
+    let mut acc: Vec<Option<[f32x8; 4]>> = splits.iter().map(|s| s.map(|_| [ninf; 4])).collect();
     for (&i, res) in job_task.iter().zip(results) {
         let got = res.into_inner().ok().flatten();
-        acc[i] = acc[i].zip(got).map(|((la, ra), (l, r))| (l.max_l(la), r.max_l(ra)));
+        acc[i] = acc[i].zip(got).map(|(a, g)| core::array::from_fn(|k| g[k].max_l(a[k])));
     }
     let (mut children, mut rest) = (Vec::new(), Vec::new());
-    for ((t, split), acc) in tasks.into_iter().zip(splits).zip(acc) {
-        let (Some(s), Some((la, ra))) = (split, acc) else {
+    for (((t, split), acc), plan) in tasks.into_iter().zip(splits).zip(acc).zip(&plans) {
+        let (Some(mut s), Some([la, ra, lb, rb])) = (split, acc) else {
             rest.push(t);
             continue;
         };
+        if plan.as_ref().is_some_and(|p| p.sampled.is_some()) {
+            // The node's boxes, measured by the partition (the sequential loop's too).
+            (s.left, s.right) = (Box8(lb), Box8(rb));
+        }
         c.max_depth = c.max_depth.max(t.depth);
         let left = out.nodes.len() as u32;
         out.nodes[t.node as usize] = t.bounds.to_node(left, 0);
@@ -712,26 +758,46 @@ pub(crate) fn subtree_with<const LOCAL_SMALL: bool>(
                 // empty): the bin sweep then costs O(N), not O(K), near the bottom of the tree.
                 let nb = p.bins.min(count);
                 let binning = Binning::new(&t.cb, nb);
-                let best = if binning.is_flat() {
-                    None
-                } else {
-                    binned::find(src, &binning, nb as usize, p.bin_axes == BinAxes::Longest, bins)
+                let longest = p.bin_axes == BinAxes::Longest;
+                let stride = binned::sample_stride(count, p.bin_sample, may_leaf);
+                let sampled = match binning.is_flat() {
+                    false if stride > 1 => binned::find_sampled(src, &binning, nb as usize, longest, stride, bins),
+                    _ => None,
                 };
-                best.map(|s| {
-                    if may_leaf && leaf_cost <= split_cost(p, s.cost, area, count) {
-                        return None;
-                    }
-                    let (mid, lcb, rcb) = binned::partition_into(src, dst, &binning, &s);
-                    debug_assert_eq!(mid, s.left_count as usize);
-                    Some(Split {
+                if let Some(s) = sampled {
+                    // The sample's plane; the sides' counts and boxes from the pass that moves
+                    // them (both sides hold some of the sample's references: neither is empty).
+                    let (mid, lcb, rcb, left, right) = binned::partition_measured(src, dst, &binning, &s);
+                    Some(Some(Split {
                         mid,
                         moved: true,
-                        left: s.left,
-                        right: s.right,
+                        left,
+                        right,
                         lcb,
                         rcb,
+                    }))
+                } else {
+                    let best = if binning.is_flat() {
+                        None
+                    } else {
+                        binned::find(src, &binning, nb as usize, longest, bins)
+                    };
+                    best.map(|s| {
+                        if may_leaf && leaf_cost <= split_cost(p, s.cost, area, count) {
+                            return None;
+                        }
+                        let (mid, lcb, rcb) = binned::partition_into(src, dst, &binning, &s);
+                        debug_assert_eq!(mid, s.left_count as usize);
+                        Some(Split {
+                            mid,
+                            moved: true,
+                            left: s.left,
+                            right: s.right,
+                            lcb,
+                            rcb,
+                        })
                     })
-                })
+                }
             }
             _ => {
                 let (_, extent) = t.cb.longest_axis();
