@@ -81,6 +81,10 @@ pub fn builders() -> Vec<BuildParams> {
         BuildParams::median(),
         BuildParams::fast(),
         BuildParams::balanced(),
+        BuildParams {
+            bin_sample: 64,
+            ..BuildParams::balanced()
+        },
         BuildParams::high(),
         BuildParams::quality(),
         BuildParams::hybrid(),

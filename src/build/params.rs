@@ -230,7 +230,7 @@ pub enum MortonCells {
 /// | preset | strategy | bins | leaf size | builds | tree |
 /// |---|---|---|---|---|---|
 /// | [`fastest`](Self::fastest) | LBVH, 30-bit | | 2, up to 4 on equal codes | fastest | worst SAH |
-/// | [`fast`](Self::fast) | binned SAH, longest axis | 8 | 1 ..= 8 | fast | good |
+/// | [`fast`](Self::fast) | binned SAH, longest axis, large nodes from a sample | 8 | 1 ..= 8 | fast | good |
 /// | [`balanced`](Self::balanced) (= `default()`) | binned SAH, all axes | 16 | 1 ..= 8 | medium | better |
 /// | [`high`](Self::high) | binned SAH, all axes, + one round of rotations | 64 | 1 ..= 8 | medium-slow | best: at or below `quality` on the 1M scenes |
 /// | [`quality`](Self::quality) | full-sweep SAH | | 1 ..= 8 | slowest | the exact greedy SAH split |
@@ -424,12 +424,15 @@ impl BuildParams {
     }
 
     /// A fast build of a good tree: binned SAH with 8 bins on the longest centroid axis
-    /// (Wald 2007).
+    /// (Wald 2007), nodes of 8,192 references or more binned from a sample of 4,096 to 8,191
+    /// ([`bin_sample`](Self::bin_sample): 1.16-1.19x faster on the 1M-triangle bench scenes,
+    /// SAH cost within 0.03% of binning every reference).
     ///
     /// ```
     /// use strahl::build::{BinAxes, BuildParams, Bvh2, Strategy};
     /// let p = BuildParams::fast();
     /// assert_eq!((p.strategy, p.bins, p.bin_axes), (Strategy::BinnedSah, 8, BinAxes::Longest));
+    /// assert_eq!(p.bin_sample, 4096);
     /// assert_eq!((p.min_leaf_size, p.max_leaf_size), (1, 8));
     /// assert!(p.check().is_ok());
     /// let tris = strahl::scene::thin_soup(1_000, 1);
