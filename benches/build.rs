@@ -162,9 +162,9 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
         ),
         ("binned16-all (balanced)", BuildParams::balanced()),
         (
-            "binned16-all, sampled",
+            "binned16-all, unsampled",
             BuildParams {
-                bin_sample: 4096,
+                bin_sample: 0,
                 ..BuildParams::balanced()
             },
         ),

@@ -4,7 +4,7 @@
 //! warm its [`Builder`], then `STRAHL_REPS` timed builds (default 5), best and median. `STRAHL_N`
 //! sets the soup size (`scene::thin_soup(n, 1)`, default 2^20); `STRAHL_ONLY` a comma-separated
 //! list of builders (`fastest`, `lbvh63`, `fast`, `fast_exact` (`fast()` binning every reference),
-//! `balanced_sampled` (`balanced()` with `bin_sample: 4096`), `binned8all`, `balanced`, `high`, `median`, `quality`,
+//! `balanced_exact` (`balanced()` binning every reference), `binned8all`, `balanced`, `high`, `median`, `quality`,
 //! `hlbvh`, `hybrid_sah`, `*_reinsert` (`balanced`, `high`, `fastest` with [`ReinsertParams::new`]); `*_normalized`: the Morton builders on the classic per-axis grid,
 //! [`MortonCells::Normalized`]). `STRAHL_SCENE` picks the scene: `soup` (default), `terrain`
 //! (`scene::terrain(724, 1)`, 1M triangles, 5:1 flat), `sphereflake` (`scene::sphereflake(3, 3)`)
@@ -54,9 +54,9 @@ fn speed() {
             },
         ),
         (
-            "balanced_sampled",
+            "balanced_exact",
             BuildParams {
-                bin_sample: 4096,
+                bin_sample: 0,
                 ..BuildParams::balanced()
             },
         ),

@@ -12,18 +12,20 @@
 //! references in a row that fall into the same bin do not wait on each other's store (binning
 //! took about 25% fewer profile samples on the 1M soup).
 //!
-//! **Sampled binning** ([`BuildParams::bin_sample`](super::BuildParams::bin_sample), on in
-//! `fast()`): a node of at least `2 S` references bins every `N / S`-th ([`find_sampled`]) and
+//! **Sampled binning** ([`BuildParams::bin_sample`](super::BuildParams::bin_sample): 4,096 in
+//! `fast()`, 16,384 in `balanced()`): a node of at least `2 S` references bins every `N / S`-th ([`find_sampled`]) and
 //! the partition pass that moves all `N` measures the children's boxes and counts
 //! ([`partition_measured`]). The top levels of a 1M build wait on memory (32 MB of references
 //! read per pass); sampling drops one of their two passes. Where the sample has no plane with
 //! references on both sides (it missed the outliers), the node bins every reference. Measured
 //! (2026-12-05, Intel Xeon, `STRAHL_SCENE=soup|terrain|sphereflake
-//! STRAHL_ONLY=fast_exact,fast,balanced,balanced_sampled STRAHL_REPS=7 cargo test --release
+//! STRAHL_ONLY=fast_exact,fast,balanced,balanced_exact STRAHL_REPS=7 cargo test --release
 //! --test build_speed -- --ignored --nocapture speed`, two runs, medians): `fast()` with
 //! `S = 4096` 1.16-1.18x faster on the 1M soup, 1.16-1.20x on the 1M terrain, 1.12-1.19x on the
 //! 1M sphereflake, SAH cost +0.00%, +0.02%, +0.03%; `balanced()` with `S = 4096` 1.22-1.28x
-//! faster, SAH cost +0.01%, +0.19%, +0.72%. Smaller samples cost more tree on multi-scale scenes
+//! faster, SAH cost +0.01%, +0.19%, +0.72%, with `S = 16384` (its preset) 1.14-1.21x faster,
+//! +0.003%, +0.00%, +0.10% (`high()`, 64 bins: +0.56% on the sphereflake at `S = 16384`, +3%
+//! at 4,096, so it bins every reference). Smaller samples cost more tree on multi-scale scenes
 //! (`S = 256`: `balanced()`'s sphereflake +4.3%), since a sample misses the few large primitives
 //! whose boxes decide the bins' areas.
 //!
