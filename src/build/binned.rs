@@ -13,7 +13,8 @@
 //! took about 25% fewer profile samples on the 1M soup).
 //!
 //! **Sampled binning** ([`BuildParams::bin_sample`](super::BuildParams::bin_sample): 4,096 in
-//! `fast()`, 16,384 in `balanced()`): a node of at least `2 S` references bins every `N / S`-th ([`find_sampled`]) and
+//! `fast()`, 16,384 in `balanced()`): a node of at least `2 S` references bins one of every
+//! `N / S` (`S` to about `1.5 S` of them, one at a hashed offset in each run: [`find_sampled`]) and
 //! the partition pass that moves all `N` measures the children's boxes and counts
 //! ([`partition_measured`]). The top levels of a 1M build wait on memory (32 MB of references
 //! read per pass); sampling drops one of their two passes. Where the sample has no plane with
@@ -64,7 +65,6 @@
 use super::params::MAX_BINS;
 use super::prims::{Box8, CBounds, PrimRef};
 use crate::math::{Lane, f32x4, f32x8};
-use alloc::vec::Vec;
 
 const K: usize = MAX_BINS as usize;
 
@@ -118,8 +118,6 @@ impl Binning {
 pub(crate) struct Bins {
     boxes: [[[Box8; K]; 3]; 2],
     counts: [[[u32; K]; 3]; 2],
-    /// The references [`find_sampled`] bins (empty until a node is sampled).
-    sample: Vec<PrimRef>,
 }
 
 impl Bins {
@@ -127,42 +125,8 @@ impl Bins {
         Self {
             boxes: [[[Box8::EMPTY; K]; 3]; 2],
             counts: [[[0; K]; 3]; 2],
-            sample: Vec::new(),
         }
     }
-}
-
-/// The stride of the sampled binning of a node of `count` references
-/// ([`BuildParams::bin_sample`](super::BuildParams::bin_sample) = `sample`), or 1 where every
-/// reference is binned: nodes of at least `2 * sample` references, and only where the node may
-/// not become a leaf (`may_leaf`), bin every `count / sample`-th reference (`sample` to
-/// `2 * sample` of them).
-#[inline]
-pub(crate) fn sample_stride(count: u32, sample: u32, may_leaf: bool) -> usize {
-    if sample == 0 || may_leaf || (count as u64) < 2 * sample as u64 {
-        1
-    } else {
-        (count / sample) as usize
-    }
-}
-
-/// [`find`] over every `stride`-th reference of `refs` (the first included). The split's counts
-/// and boxes are the sample's: [`partition_measured`] gives the node's. `None` also where the
-/// sample has no plane with references on both sides (the caller then bins every reference).
-pub(crate) fn find_sampled(
-    refs: &[PrimRef],
-    binning: &Binning,
-    bins: usize,
-    longest_only: bool,
-    stride: usize,
-    scratch: &mut Bins,
-) -> Option<BinSplit> {
-    let mut sample = core::mem::take(&mut scratch.sample);
-    sample.clear();
-    sample.extend(refs.iter().step_by(stride.max(1)).copied());
-    let found = find(&sample, binning, bins, longest_only, scratch);
-    scratch.sample = sample;
-    found
 }
 
 /// The best plane found by [`find`]: refs whose bin on `axis` is `<= plane` go left.
@@ -175,6 +139,80 @@ pub(crate) struct BinSplit {
     pub left_count: u32,
     pub left: Box8,
     pub right: Box8,
+}
+
+/// The stride of the sampled binning of a node of `count` references
+/// ([`BuildParams::bin_sample`](super::BuildParams::bin_sample) = `sample`), or 1 where every
+/// reference is binned: nodes of at least `2 * sample` references, and only where the node may
+/// not become a leaf (`may_leaf`), bin one reference of every `count / sample` ([`find_sampled`]).
+#[inline]
+pub(crate) fn sample_stride(count: u32, sample: u32, may_leaf: bool) -> usize {
+    if sample == 0 || may_leaf || (count as u64) < 2 * sample as u64 {
+        1
+    } else {
+        (count / sample) as usize
+    }
+}
+
+/// The position of the `j`-th reference of a sample with `stride`: one at a hashed offset within
+/// each run `[j stride, (j + 1) stride)` (stratified, so that a repeating input order whose period
+/// divides the stride cannot make every sampled reference the same one).
+#[inline]
+pub(crate) fn sample_index(j: usize, stride: usize) -> usize {
+    // A multiplicative hash of `j`, mapped onto `0..stride`.
+    let h = (j as u32).wrapping_mul(0x9E37_79B9) as u64;
+    j * stride + ((h * stride as u64) >> 32) as usize
+}
+
+/// [`find`] over a stratified sample of `refs`: `floor(N / stride)` references, one per run of
+/// `stride` ([`sample_index`]), so `S` to about `1.5 S` of them for the stride of
+/// [`sample_stride`]. The split's counts and boxes are the sample's: [`partition_measured`] gives
+/// the node's. `None` also where the sample has no plane with references on both sides (the
+/// caller then bins every reference).
+pub(crate) fn find_sampled(
+    refs: &[PrimRef],
+    binning: &Binning,
+    bins: usize,
+    longest_only: bool,
+    stride: usize,
+    scratch: &mut Bins,
+) -> Option<BinSplit> {
+    let stride = stride.max(1);
+    let picks = (0..refs.len() / stride).filter_map(|j| refs.get(sample_index(j, stride)));
+    match axes_mask(binning, longest_only) {
+        1 => bin_picks::<1>(picks, binning, bins, scratch),
+        2 => bin_picks::<2>(picks, binning, bins, scratch),
+        4 => bin_picks::<4>(picks, binning, bins, scratch),
+        _ => bin_picks::<7>(picks, binning, bins, scratch),
+    }
+}
+
+/// Bins the references `picks` into the first set of `scratch` (one set: the sample is small) and
+/// sweeps it.
+fn bin_picks<'a, const AXES: u32>(
+    picks: impl Iterator<Item = &'a PrimRef>,
+    binning: &Binning,
+    bins: usize,
+    scratch: &mut Bins,
+) -> Option<BinSplit> {
+    let n = bins.clamp(2, K);
+    for a in 0..3 {
+        if AXES >> a & 1 != 0 {
+            scratch.boxes[0][a][..n].fill(Box8::EMPTY);
+            scratch.counts[0][a][..n].fill(0);
+        }
+    }
+    for r in picks {
+        let b = binning.bins_of(r.c2());
+        for a in 0..3 {
+            if AXES >> a & 1 != 0 {
+                let i = b[a] as usize & (K - 1);
+                scratch.boxes[0][a][i].grow(r.bounds());
+                scratch.counts[0][a][i] += 1;
+            }
+        }
+    }
+    sweep::<AXES>(scratch, binning, bins)
 }
 
 /// Bins `refs` with `binning` (`bins` bins per axis) and returns the cheapest plane with primitives
@@ -214,7 +252,6 @@ fn bin_refs<const AXES: u32>(refs: &[PrimRef], binning: &Binning, bins: usize, s
     let Bins {
         boxes: sets,
         counts: set_counts,
-        ..
     } = scratch;
     for set in 0..2 {
         for a in 0..3 {
@@ -725,6 +762,55 @@ mod tests {
             }
         }
         best
+    }
+
+    #[test]
+    fn sample_stride_and_indices() {
+        // Sampling starts at `2 S` references, never where the node may be a leaf or `S` is 0.
+        assert_eq!(sample_stride(2 * 64 - 1, 64, false), 1);
+        assert_eq!(sample_stride(2 * 64, 64, false), 2);
+        assert_eq!(sample_stride(3 * 64 - 1, 64, false), 2);
+        assert_eq!(sample_stride(1 << 20, 4096, false), 256);
+        assert_eq!(sample_stride(1 << 20, 4096, true), 1);
+        assert_eq!(sample_stride(u32::MAX, 0, false), 1);
+        assert_eq!(sample_stride(u32::MAX, u32::MAX, false), 1);
+        assert_eq!(sample_stride(u32::MAX, 1 << 31, false), 1);
+        for stride in [1usize, 2, 3, 5, 20, 256, 1 << 20] {
+            for j in [0usize, 1, 2, 7, 1000, 123_456] {
+                let i = sample_index(j, stride);
+                assert!((j * stride..(j + 1) * stride).contains(&i), "{j} {stride}");
+            }
+        }
+        // A repeating order (period 5, dividing the stride 20): every residue sampled.
+        let residues: alloc::collections::BTreeSet<usize> = (0..1000).map(|j| sample_index(j, 20) % 5).collect();
+        assert_eq!(residues.len(), 5);
+    }
+
+    /// The sample's split, on boxes repeating with a period that divides the stride: the
+    /// stratified sample sees all five boxes (its sides' union is the node's box), where every
+    /// `stride`-th reference from the first would be the same box, and no plane.
+    #[test]
+    fn sampled_split_sees_a_periodic_order() {
+        let five: Vec<Aabb> = (0..5)
+            .map(|i| {
+                let p = Vec3::new(i as f32 * 10.0, 0.0, 0.0);
+                Aabb::new(p, p + Vec3::ONE)
+            })
+            .collect();
+        let refs: Vec<PrimRef> = (0..20_000).map(|i| PrimRef::new(&five[i % 5], i as u32)).collect();
+        let (bx, cb) = crate::build::topdown::bounds_of(&refs);
+        let binning = Binning::new(&cb, 8);
+        let mut bins = Bins::new();
+        let stride = sample_stride(20_000, 1000, false);
+        assert_eq!(stride % 5, 0);
+        let s = find_sampled(&refs, &binning, 8, true, stride, &mut bins).unwrap();
+        // Lanes 0..3 `-min`, 4..7 `max` (lanes 3 and 7 are not coordinates).
+        let (got, want) = (s.left.union(s.right).0.to_array(), bx.0.to_array());
+        for k in [0, 1, 2, 4, 5, 6] {
+            assert_eq!(got[k], want[k], "lane {k}");
+        }
+        let plain: Vec<PrimRef> = refs.iter().step_by(stride).copied().collect();
+        assert!(find(&plain, &binning, 8, true, &mut bins).is_none());
     }
 
     #[test]

@@ -276,8 +276,9 @@ pub struct BuildParams {
     pub bin_axes: BinAxes,
     /// Sampled binning of large nodes ([`Strategy::BinnedSah`], and the binned-SAH tops and
     /// mini-trees of the HLBVH strategies): a node of at least `2 * bin_sample` references that
-    /// may not be a leaf bins only every `k`-th of them, `k = N / bin_sample` (so `bin_sample` to
-    /// `2 * bin_sample` references), and the pass that partitions all `N` by the plane found
+    /// may not be a leaf bins one of every `k` of them, `k = N / bin_sample`, at a hashed offset in
+    /// each run of `k` (so `bin_sample` to about `1.5 * bin_sample` references), and the pass that
+    /// partitions all `N` by the plane found
     /// measures the children's counts and boxes. The top levels of a large build, which wait on
     /// memory, then read the references once per level instead of twice. The plane is the
     /// sample's cheapest, not always the node's; where no plane of the sample has references on
@@ -425,7 +426,7 @@ impl BuildParams {
     }
 
     /// A fast build of a good tree: binned SAH with 8 bins on the longest centroid axis
-    /// (Wald 2007), nodes of 8,192 references or more binned from a sample of 4,096 to 8,191
+    /// (Wald 2007), nodes of 8,192 references or more binned from a sample of 4,096 to about 6,144
     /// ([`bin_sample`](Self::bin_sample): 1.16-1.19x faster on the 1M-triangle bench scenes,
     /// SAH cost within 0.03% of binning every reference).
     ///
@@ -452,7 +453,7 @@ impl BuildParams {
     }
 
     /// The default: binned SAH with 16 bins on all three axes, nodes of 32,768 references or
-    /// more binned from a sample of 16,384 to 32,767 ([`bin_sample`](Self::bin_sample):
+    /// more binned from a sample of 16,384 to about 24,576 ([`bin_sample`](Self::bin_sample):
     /// 1.14-1.21x faster on the 1M-triangle bench scenes, SAH cost within 0.1% of binning every
     /// reference; scenes under 32,768 triangles are not sampled at all).
     ///
@@ -525,6 +526,7 @@ impl BuildParams {
     pub const fn quality() -> Self {
         Self {
             strategy: Strategy::SweepSah,
+            bin_sample: 0,
             ..Self::balanced()
         }
     }
@@ -544,6 +546,7 @@ impl BuildParams {
     pub const fn median() -> Self {
         Self {
             strategy: Strategy::Median,
+            bin_sample: 0,
             max_leaf_size: 4,
             ..Self::balanced()
         }

@@ -178,7 +178,10 @@ const WIDE_CHUNK: usize = 16_384;
 /// references cut into chunks binned side by side on up to `threads` threads, then partitioned
 /// side by side into the other buffer (`binned::bin_chunk`, `binned::partition_chunk`): the very
 /// split, order and child bounds of the sequential loop, since bins merge exactly (unions and
-/// sums) and each chunk's side counts place its pieces. Returns the children (two per task split
+/// sums) and each chunk's side counts place its pieces. A task the sequential loop splits from a
+/// sample ([`BuildParams::bin_sample`]) takes the same sample's split, found here on the calling
+/// thread; its chunks are then only counted (`binned::count_left`), and its children's boxes are
+/// the chunks' boxes measured by the partition, merged. Returns the children (two per task split
 /// here) and the tasks to split the sequential way (a leaf, a forced or depth-bounded split, a
 /// flat node: the rare cases, left to [`subtree_with`]), whose ranges are still valid where they
 /// were (only the other buffer may have been written).
