@@ -204,9 +204,9 @@ fn bin_picks<'a, const AXES: u32>(
     }
     for r in picks {
         let b = binning.bins_of(r.c2());
-        for a in 0..3 {
+        for (a, &ba) in b.iter().enumerate().take(3) {
             if AXES >> a & 1 != 0 {
-                let i = b[a] as usize & (K - 1);
+                let i = ba as usize & (K - 1);
                 scratch.boxes[0][a][i].grow(r.bounds());
                 scratch.counts[0][a][i] += 1;
             }
