@@ -19,16 +19,14 @@
 //! ([`partition_measured`]). The top levels of a 1M build wait on memory (32 MB of references
 //! read per pass); sampling drops one of their two passes. Where the sample has no plane with
 //! references on both sides (it missed the outliers), the node bins every reference. Measured
-//! (2026-12-05, Intel Xeon, `STRAHL_SCENE=soup|terrain|sphereflake
-//! STRAHL_ONLY=fast_exact,fast,balanced,balanced_exact STRAHL_REPS=7 cargo test --release
-//! --test build_speed -- --ignored --nocapture speed`, two runs, medians): `fast()` with
-//! `S = 4096` 1.16-1.18x faster on the 1M soup, 1.16-1.20x on the 1M terrain, 1.12-1.19x on the
-//! 1M sphereflake, SAH cost +0.00%, +0.02%, +0.03%; `balanced()` with `S = 4096` 1.22-1.28x
-//! faster, SAH cost +0.01%, +0.19%, +0.72%, with `S = 16384` (its preset) 1.14-1.21x faster,
-//! +0.003%, +0.00%, +0.10% (`high()`, 64 bins: +0.56% on the sphereflake at `S = 16384`, +3%
-//! at 4,096, so it bins every reference). Smaller samples cost more tree on multi-scale scenes
-//! (`S = 256`: `balanced()`'s sphereflake +4.3%), since a sample misses the few large primitives
-//! whose boxes decide the bins' areas.
+//! (2026-12-05, Intel Xeon; criterion, `STRAHL_BENCH_SCENES=soup1M,terrain1M,sphereflake1M cargo
+//! bench --features embree --bench build`, SAH costs from the `build_speed` harness's `fast`,
+//! `fast_exact`, `balanced`, `balanced_exact`): `fast()` (`S = 4096`) 1.17-1.19x faster on the 1M
+//! soup, terrain and sphereflake, SAH cost +0.00%, +0.01%, +0.11%; `balanced()` (`S = 16384`)
+//! 1.13-1.18x faster, +0.004%, -0.01%, -0.01%. `high()` (64 bins) bins every reference: +0.56% on
+//! the sphereflake at `S = 16384`. Smaller samples cost more tree on multi-scale and clustered
+//! scenes (`S = 256`: `balanced()`'s sphereflake +4.3%), since a sample misses the few large
+//! primitives whose boxes decide the bins' areas.
 //!
 //! **Small ranges** (at most [`SMALL`] = 16 references) are split by an exact sweep instead
 //! ([`find_small`]): binning costs about 100 ns per node in bin resets and sweeps, which

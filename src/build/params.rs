@@ -427,8 +427,8 @@ impl BuildParams {
 
     /// A fast build of a good tree: binned SAH with 8 bins on the longest centroid axis
     /// (Wald 2007), nodes of 8,192 references or more binned from a sample of 4,096 to about 6,144
-    /// ([`bin_sample`](Self::bin_sample): 1.16-1.19x faster on the 1M-triangle bench scenes,
-    /// SAH cost within 0.03% of binning every reference).
+    /// ([`bin_sample`](Self::bin_sample): 1.17-1.19x faster on the 1M-triangle bench scenes,
+    /// SAH cost within 0.11% of binning every reference).
     ///
     /// ```
     /// use strahl::build::{BinAxes, BuildParams, Bvh2, Strategy};
@@ -454,7 +454,7 @@ impl BuildParams {
 
     /// The default: binned SAH with 16 bins on all three axes, nodes of 32,768 references or
     /// more binned from a sample of 16,384 to about 24,576 ([`bin_sample`](Self::bin_sample):
-    /// 1.14-1.21x faster on the 1M-triangle bench scenes, SAH cost within 0.1% of binning every
+    /// 1.13-1.18x faster on the 1M-triangle bench scenes, SAH cost within 0.01% of binning every
     /// reference; scenes under 32,768 triangles are not sampled at all).
     ///
     /// ```
