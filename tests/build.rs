@@ -2,6 +2,8 @@
 //! builder, and closest hit / any hit through every builder's tree against brute force over all
 //! primitives, with both triangle tests.
 
+mod common;
+
 use strahl::build::{
     BinAxes, BuildError, BuildParams, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy, TreeletParams,
     ValidateError,
@@ -503,15 +505,8 @@ fn coordinates_from_1e_minus_8_to_1e8() {
 
 #[test]
 fn far_outlier_beside_100000_triangles() {
-    let mut r = Rng::new(10);
-    let mut tris: Vec<Triangle> = (0..100_000)
-        .map(|_| {
-            let p = Vec3::new(r.f32(), r.f32(), r.f32());
-            [p, p + r.unit_vector() * 0.01, p + r.unit_vector() * 0.01]
-        })
-        .collect();
+    let tris = common::cube_and_far_outlier(10);
     let far = Vec3::splat(1e7);
-    tris.push([far, far + Vec3::X, far + Vec3::Y]);
     let mut rays = rays(&Aabb::new(Vec3::ZERO, Vec3::ONE), 48, 4);
     rays.push(Ray::new(far + Vec3::new(0.2, 0.2, -1.0), Vec3::Z)); // hits the outlier
     rays.push(Ray::new(
@@ -527,15 +522,7 @@ fn far_outlier_beside_100000_triangles() {
 /// root, the same SAH cost as without sampling.
 #[test]
 fn sampled_binning_falls_back_where_the_sample_sees_no_plane() {
-    let mut r = Rng::new(11);
-    let mut tris: Vec<Triangle> = (0..100_000)
-        .map(|_| {
-            let p = Vec3::new(r.f32(), r.f32(), r.f32());
-            [p, p + r.unit_vector() * 0.01, p + r.unit_vector() * 0.01]
-        })
-        .collect();
-    let far = Vec3::splat(1e7);
-    tris.push([far, far + Vec3::X, far + Vec3::Y]);
+    let tris = common::cube_and_far_outlier(11);
     let sampled = BuildParams::fast();
     // The outlier (index 100,000) is not a multiple of the stride 100,001 / 4,096 = 24.
     assert_eq!(sampled.bin_sample, 4096);

@@ -3,6 +3,8 @@
 //! leaves, walked from the root; the same statistics and SAH cost), `validate()` passes, and two
 //! runs with the same thread count make the same bytes.
 
+mod common;
+
 use strahl::build::{BuildParams, BuildStats, Builder, Bvh2, MortonBits, Refine, Strategy, TreeletParams};
 use strahl::geometry::Triangle;
 use strahl::scene::{self, Rng};
@@ -264,15 +266,7 @@ fn large_scenes_split_wide() {
 /// bin), both bin every reference.
 #[test]
 fn sampled_splits_in_wide_rounds() {
-    let mut r = Rng::new(12);
-    let mut tris: Vec<Triangle> = (0..100_000)
-        .map(|_| {
-            let p = Vec3::new(r.f32(), r.f32(), r.f32());
-            [p, p + r.unit_vector() * 0.01, p + r.unit_vector() * 0.01]
-        })
-        .collect();
-    let far = Vec3::splat(1e7);
-    tris.push([far, far + Vec3::X, far + Vec3::Y]);
+    let tris = common::cube_and_far_outlier(12);
     let params = [
         ("fast", BuildParams::fast()),
         (

@@ -437,20 +437,24 @@ pub(crate) fn partition_into(
     split: &BinSplit,
 ) -> (usize, CBounds, CBounds) {
     // One copy of the loop per axis, so the axis lane is a constant.
-    match split.axis {
-        0 => partition_axis::<0>(src, dst, binning, split.plane),
-        1 => partition_axis::<1>(src, dst, binning, split.plane),
-        _ => partition_axis::<2>(src, dst, binning, split.plane),
-    }
+    let (l, lcb, rcb, _, _) = match split.axis {
+        0 => partition_axis::<0, false>(src, dst, binning, split.plane),
+        1 => partition_axis::<1, false>(src, dst, binning, split.plane),
+        _ => partition_axis::<2, false>(src, dst, binning, split.plane),
+    };
+    (l, lcb, rcb)
 }
 
+/// The partition pass of [`partition_into`] on axis `A`; with `MEASURE` it also grows both sides'
+/// boxes (two more selects and `max`es per reference: free on the top levels
+/// [`partition_measured`] runs on, whose pass waits on memory), else they are returned empty.
 #[inline(never)]
-fn partition_axis<const A: usize>(
+fn partition_axis<const A: usize, const MEASURE: bool>(
     src: &[PrimRef],
     dst: &mut [PrimRef],
     binning: &Binning,
     plane: usize,
-) -> (usize, CBounds, CBounds) {
+) -> (usize, CBounds, CBounds, Box8, Box8) {
     let n = src.len().min(dst.len());
     let (origin, scale) = (binning.origin.to_array()[A], binning.scale.to_array()[A]);
     let limit = (plane + 1) as f32;
@@ -458,6 +462,7 @@ fn partition_axis<const A: usize>(
     // Centroid bounds in negated-min form, `[-c, c]` per side: one `max` grows a side.
     let ninf = f32x8::splat(f32::NEG_INFINITY);
     let (mut lacc, mut racc) = (ninf, ninf);
+    let (mut lbox, mut rbox) = (ninf, ninf);
     for x in &src[..n] {
         let c = x.c2();
         // `q < limit`, or NaN (bin 0): anything but `q >= limit`.
@@ -468,13 +473,18 @@ fn partition_axis<const A: usize>(
         dst[r - 1] = *x;
         l += left as usize;
         r -= !left as usize;
-        // Grow the side's centroid bounds without a branch: the other side grows by -inf.
+        // Grow the side's bounds without a branch: the other side grows by -inf.
         let cc: f32x8 = bytemuck::cast([-c, c]);
         let m = f32x8::splat(f32::from_bits(0u32.wrapping_sub(left as u32)));
         lacc = m.select(cc, ninf).max_l(lacc);
         racc = m.select(ninf, cc).max_l(racc);
+        if MEASURE {
+            let bb = x.bounds().0;
+            lbox = m.select(bb, ninf).max_l(lbox);
+            rbox = m.select(ninf, bb).max_l(rbox);
+        }
     }
-    (l, cbounds_of(lacc), cbounds_of(racc))
+    (l, cbounds_of(lacc), cbounds_of(racc), Box8(lbox), Box8(rbox))
 }
 
 /// [`partition_into`] that also grows both sides' boxes (for a split found on a sample, whose
@@ -487,47 +497,10 @@ pub(crate) fn partition_measured(
     split: &BinSplit,
 ) -> (usize, CBounds, CBounds, Box8, Box8) {
     match split.axis {
-        0 => partition_measured_axis::<0>(src, dst, binning, split.plane),
-        1 => partition_measured_axis::<1>(src, dst, binning, split.plane),
-        _ => partition_measured_axis::<2>(src, dst, binning, split.plane),
+        0 => partition_axis::<0, true>(src, dst, binning, split.plane),
+        1 => partition_axis::<1, true>(src, dst, binning, split.plane),
+        _ => partition_axis::<2, true>(src, dst, binning, split.plane),
     }
-}
-
-/// [`partition_axis`] with the sides' boxes grown too (two more selects and `max`es per
-/// reference: free on the top levels this runs on, whose pass waits on memory).
-#[inline(never)]
-fn partition_measured_axis<const A: usize>(
-    src: &[PrimRef],
-    dst: &mut [PrimRef],
-    binning: &Binning,
-    plane: usize,
-) -> (usize, CBounds, CBounds, Box8, Box8) {
-    let n = src.len().min(dst.len());
-    let (origin, scale) = (binning.origin.to_array()[A], binning.scale.to_array()[A]);
-    let limit = (plane + 1) as f32;
-    let (mut l, mut r) = (0usize, n);
-    let ninf = f32x8::splat(f32::NEG_INFINITY);
-    let (mut lacc, mut racc) = (ninf, ninf);
-    let (mut lbox, mut rbox) = (ninf, ninf);
-    for x in &src[..n] {
-        let c = x.c2();
-        // The side test of `partition_axis`.
-        let right = (c.to_array()[A] - origin) * scale >= limit;
-        let left = !right;
-        // While refs remain, `l < r`: both slots are in range. One of the two writes is kept.
-        dst[l] = *x;
-        dst[r - 1] = *x;
-        l += left as usize;
-        r -= !left as usize;
-        let cc: f32x8 = bytemuck::cast([-c, c]);
-        let bb = x.bounds().0;
-        let m = f32x8::splat(f32::from_bits(0u32.wrapping_sub(left as u32)));
-        lacc = m.select(cc, ninf).max_l(lacc);
-        racc = m.select(ninf, cc).max_l(racc);
-        lbox = m.select(bb, ninf).max_l(lbox);
-        rbox = m.select(ninf, bb).max_l(rbox);
-    }
-    (l, cbounds_of(lacc), cbounds_of(racc), Box8(lbox), Box8(rbox))
 }
 
 /// How many of `refs` go left of `split` (the side test of [`partition_into`]).

@@ -143,3 +143,18 @@ pub fn same(a: Option<Hit>, b: Option<Hit>, tris: &[Triangle], ray: &Ray, what: 
         _ => panic!("{what}: {a:?} vs {b:?} for {ray:?}"),
     }
 }
+
+/// 100,000 small triangles in the unit cube (random positions, edges of 0.01 in random
+/// directions, from `Rng::new(seed)`) and one far outlier at `1e7` (the last, index 100,000).
+pub fn cube_and_far_outlier(seed: u64) -> Vec<Triangle> {
+    let mut r = Rng::new(seed);
+    let mut tris: Vec<Triangle> = (0..100_000)
+        .map(|_| {
+            let p = Vec3::new(r.f32(), r.f32(), r.f32());
+            [p, p + r.unit_vector() * 0.01, p + r.unit_vector() * 0.01]
+        })
+        .collect();
+    let far = Vec3::splat(1e7);
+    tris.push([far, far + Vec3::X, far + Vec3::Y]);
+    tris
+}
