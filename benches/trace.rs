@@ -29,7 +29,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::time::Instant;
 use strahl::build::{BuildParams, Bvh2};
-use strahl::geometry::Triangle;
+use strahl::geometry::{Hit, Triangle};
 use strahl::intersect::{PreparedRay, moller};
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
@@ -130,6 +130,15 @@ fn run_bvh8(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter().filter(|r| c.bvh8.intersect::<Moller>(r).is_some()).count()
 }
 
+/// BVH8 with a hit filter that accepts every hit (`t` is always finite) but that the compiler
+/// cannot see through: the cost of one filter call per candidate hit.
+fn run_bvh8_filter_all(c: &Contenders, rays: &[Ray]) -> usize {
+    let keep = |h: &Hit| h.t.is_finite();
+    rays.iter()
+        .filter(|r| c.bvh8.intersect_filtered::<Moller>(r, keep).is_some())
+        .count()
+}
+
 fn run_bvh_crate(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter()
         .filter(|r| {
@@ -219,6 +228,13 @@ fn run_bvh8_occluded(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter().filter(|r| c.bvh8.occluded::<Moller>(r)).count()
 }
 
+fn run_bvh8_occluded_filter_all(c: &Contenders, rays: &[Ray]) -> usize {
+    let keep = |h: &Hit| h.t.is_finite();
+    rays.iter()
+        .filter(|r| c.bvh8.occluded_filtered::<Moller>(r, keep))
+        .count()
+}
+
 fn run_bvh8_incoherent(c: &Contenders, rays: &[Ray]) -> usize {
     let mut hits = vec![None; rays.len()];
     c.bvh8.intersect_batch_incoherent::<Moller>(rays, &mut hits);
@@ -303,6 +319,16 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
     let embree = peers::embree::Scene::new(&device, &c.tris, peers::embree::Quality::Medium);
     #[cfg(feature = "embree")]
     let embree_robust = peers::embree::Scene::with_flags(&device, &c.tris, peers::embree::Quality::Medium, true);
+    // The same scene with a hit filter that keeps every hit (`bvh8_filter_all`'s, through Embree's
+    // filter callbacks).
+    #[cfg(feature = "embree")]
+    let embree_filter = peers::embree::Scene::with_filter(
+        &device,
+        &c.tris,
+        peers::embree::Quality::Medium,
+        false,
+        Some(peers::embree::keep_finite_t),
+    );
 
     for (kind, rays, any_hit) in &kinds {
         let members: Vec<(&str, Run)> = if *any_hit {
@@ -311,6 +337,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh4", run_bvh4_occluded),
                 ("bvh8", run_bvh8_occluded),
                 ("bvh8_fast", run_bvh8_occluded_fast),
+                ("bvh8_filter_all", run_bvh8_occluded_filter_all),
                 ("bvh8_incoherent", run_bvh8_occluded_incoherent),
                 ("bvh8_reordered", run_bvh8_occluded_reordered),
                 ("packet8_bvh8", run_packet8_occluded),
@@ -323,6 +350,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh4", run_bvh4),
                 ("bvh8", run_bvh8),
                 ("bvh8_fast", run_bvh8_fast),
+                ("bvh8_filter_all", run_bvh8_filter_all),
                 ("bvh8_incoherent", run_bvh8_incoherent),
                 ("bvh8_reordered", run_bvh8_reordered),
                 ("packet8_bvh8", run_packet8),
@@ -370,6 +398,16 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 got.abs_diff(reference) <= rays.len() / 1000 + 1,
                 "{name}/{kind}: embree hits {got}, bvh2 {reference}"
             );
+            let ef = &embree_filter;
+            let got = if *any_hit {
+                rays.iter().filter(|r| ef.occluded1(r)).count()
+            } else {
+                rays.iter().filter(|r| ef.intersect1(r).is_some()).count()
+            };
+            assert!(
+                got.abs_diff(reference) <= rays.len() / 1000 + 1,
+                "{name}/{kind}: filtered embree hits {got}, bvh2 {reference}"
+            );
             let er = &embree_robust;
             let got = if *any_hit {
                 rays.iter().filter(|r| er.occluded1(r)).count()
@@ -403,6 +441,9 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 g.bench_function("embree_rtcOccluded1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| e.occluded1(r)).count())
                 });
+                g.bench_function("embree_filter_all_rtcOccluded1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| ef.occluded1(r)).count())
+                });
                 g.bench_function("embree_robust_rtcOccluded1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| er.occluded1(r)).count())
                 });
@@ -412,6 +453,9 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
             } else {
                 g.bench_function("embree_rtcIntersect1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| e.intersect1(r).is_some()).count())
+                });
+                g.bench_function("embree_filter_all_rtcIntersect1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| ef.intersect1(r).is_some()).count())
                 });
                 g.bench_function("embree_robust_rtcIntersect1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| er.intersect1(r).is_some()).count())

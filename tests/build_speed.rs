@@ -113,7 +113,35 @@ fn speed() {
             },
         ),
     ];
-    for (name, p) in &list {
+    // `STRAHL_CUSTOM=bins,axes,sample` (axes: all, longest, allbutsmall): one more binned-SAH
+    // member, `custom`, for trying a point between the presets.
+    let custom = env("STRAHL_CUSTOM").map(|c| {
+        let f: Vec<&str> = c.split(',').collect();
+        let axes = match f.get(1).copied() {
+            Some("longest") => BinAxes::Longest,
+            Some("allbutsmall") => BinAxes::AllButSmall,
+            _ => BinAxes::All,
+        };
+        let bins = f.first().and_then(|s| s.parse().ok()).unwrap_or(16);
+        let bin_sample = f.get(2).and_then(|s| s.parse().ok()).unwrap_or(0);
+        let base = if f.get(3) == Some(&"hybrid") {
+            BuildParams::hybrid_sah()
+        } else {
+            BuildParams::balanced()
+        };
+        let cluster_size = f.get(4).and_then(|s| s.parse().ok()).unwrap_or(base.cluster_size);
+        (
+            "custom",
+            BuildParams {
+                bins,
+                bin_axes: axes,
+                bin_sample,
+                cluster_size,
+                ..base
+            },
+        )
+    });
+    for (name, p) in list.iter().chain(custom.iter()) {
         if only.as_ref().is_some_and(|o| !o.split(',').any(|x| x == *name)) {
             continue;
         }

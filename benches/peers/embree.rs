@@ -150,8 +150,45 @@ struct RTCBuildArguments {
     user_ptr: *mut c_void,
 }
 
+/// Embree's `RTCFilterFunctionNArguments`: the candidate hits of `N` rays (SoA `RTCRayN` and
+/// `RTCHitN`); the filter clears `valid[i]` to reject hit `i`.
+#[repr(C)]
+pub struct RTCFilterFunctionNArguments {
+    valid: *mut i32,
+    geometry_user_ptr: *mut c_void,
+    context: *mut RTCIntersectContext,
+    ray: *mut f32,
+    hit: *mut f32,
+    n: c_uint,
+}
+
+/// A filter callback (`RTCFilterFunctionN`).
+pub type RTCFilterFunctionN = unsafe extern "C" fn(args: *const RTCFilterFunctionNArguments);
+
+/// The filter the trace bench gives Embree: keeps every hit whose distance is finite (all of
+/// them), read from the ray's `tfar` as a filter that looked at the hit would; the same work as
+/// strahl's `|h: &Hit| h.t.is_finite()`, through Embree's callback interface.
+///
+/// # Safety
+/// Called by Embree only, with its arguments for `N` rays.
+pub unsafe extern "C" fn keep_finite_t(args: *const RTCFilterFunctionNArguments) {
+    // SAFETY: Embree passes valid arguments: `valid` and the SoA ray of `n` lanes, `tfar` at
+    // float offset `8 n` (org xyz, tnear, dir xyz, time, then tfar).
+    unsafe {
+        let a = &*args;
+        let n = a.n as usize;
+        for i in 0..n {
+            if *a.valid.add(i) != 0 && !(*a.ray.add(8 * n + i)).is_finite() {
+                *a.valid.add(i) = 0;
+            }
+        }
+    }
+}
+
 #[link(name = "embree3")]
 unsafe extern "C" {
+    fn rtcSetGeometryIntersectFilterFunction(geometry: RTCGeometry, filter: Option<RTCFilterFunctionN>);
+    fn rtcSetGeometryOccludedFilterFunction(geometry: RTCGeometry, filter: Option<RTCFilterFunctionN>);
     fn rtcNewDevice(config: *const c_char) -> RTCDevice;
     fn rtcReleaseDevice(device: RTCDevice);
     fn rtcGetDeviceError(device: RTCDevice) -> c_uint;
@@ -246,6 +283,19 @@ impl<'d> Scene<'d> {
     /// reduce arithmetic accuracy").
     #[allow(dead_code)] // used by some bench targets only
     pub fn with_flags(device: &'d Device, tris: &[[Vec3; 3]], quality: Quality, robust: bool) -> Self {
+        Self::with_filter(device, tris, quality, robust, None)
+    }
+
+    /// [`with_flags`](Self::with_flags), with `filter` as the geometry's intersection and
+    /// occlusion filter function (Embree's way of alpha testing).
+    #[allow(dead_code)] // used by some bench targets only
+    pub fn with_filter(
+        device: &'d Device,
+        tris: &[[Vec3; 3]],
+        quality: Quality,
+        robust: bool,
+        filter: Option<RTCFilterFunctionN>,
+    ) -> Self {
         // SAFETY: standard Embree scene setup on a live device; the buffers Embree allocates are
         // written within their sizes (3 floats per vertex, 3 u32 per triangle) before commit.
         unsafe {
@@ -274,6 +324,10 @@ impl<'d> Scene<'d> {
                     v[i * 9 + j * 3..i * 9 + j * 3 + 3].copy_from_slice(&p.to_array());
                     idx[i * 3 + j] = (i * 3 + j) as u32;
                 }
+            }
+            if filter.is_some() {
+                rtcSetGeometryIntersectFilterFunction(geom, filter);
+                rtcSetGeometryOccludedFilterFunction(geom, filter);
             }
             rtcCommitGeometry(geom);
             rtcAttachGeometry(scene, geom);

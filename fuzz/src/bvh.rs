@@ -315,6 +315,29 @@ pub fn check_bvh(case: &BvhCase) {
                 "{}",
                 what("bvh8 fast occluded")
             );
+            // A hit filter (even primitives only): the nearest accepted hit, and whether there is one.
+            let even = |h: &Hit| h.prim % 2 == 0;
+            let want_even = strahl::traverse::intersect_brute_force_filtered::<Watertight, _, _>(&kept[..], ray, even);
+            agrees(
+                &kept,
+                ray,
+                b2.intersect_filtered::<Watertight, _>(tris, ray, even),
+                want_even,
+                &what("bvh2 filtered"),
+            );
+            agrees(
+                &kept,
+                ray,
+                b8.intersect_filtered::<Watertight>(ray, even),
+                want_even,
+                &what("bvh8 filtered"),
+            );
+            assert_eq!(
+                b8.occluded_filtered::<Watertight>(ray, even),
+                want_even.is_some(),
+                "{}",
+                what("bvh8 filtered occluded")
+            );
         }
         if params == builders()[0] {
             check_refit(case, &b2, &b8);

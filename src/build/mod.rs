@@ -546,4 +546,49 @@ impl Bvh2 {
     pub fn occluded<T: TriangleTest, P: Triangles + ?Sized>(&self, tris: &P, ray: &Ray) -> bool {
         occluded_scalar::<T, P>(self.view(), tris, ray)
     }
+
+    /// Closest hit of `ray` that `filter` accepts
+    /// ([`traverse::intersect_scalar_filtered`](crate::traverse::intersect_scalar_filtered),
+    /// [`HitFilter`](crate::traverse::HitFilter)).
+    ///
+    /// ```
+    /// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, traverse::{Watertight, intersect_brute_force_filtered}};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -4.0), Vec3::Z);
+    /// let even = |h: &Hit| h.prim % 2 == 0;
+    /// let hit = bvh.intersect_filtered::<Watertight, _>(&tris[..], &ray, even).unwrap();
+    /// assert_eq!(Some(hit), intersect_brute_force_filtered::<Watertight, _, _>(&tris[..], &ray, even));
+    /// assert_eq!(hit.prim % 2, 0);
+    /// ```
+    #[inline]
+    pub fn intersect_filtered<T: TriangleTest, P: Triangles + ?Sized>(
+        &self,
+        tris: &P,
+        ray: &Ray,
+        filter: impl crate::traverse::HitFilter,
+    ) -> Option<Hit> {
+        crate::traverse::intersect_scalar_filtered::<T, P, _>(self.view(), tris, ray, filter)
+    }
+
+    /// `true` if `ray` hits a triangle that `filter` accepts
+    /// ([`traverse::occluded_scalar_filtered`](crate::traverse::occluded_scalar_filtered)).
+    ///
+    /// ```
+    /// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, traverse::Watertight};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -4.0), Vec3::Z);
+    /// assert!(bvh.occluded_filtered::<Watertight, _>(&tris[..], &ray, |_: &Hit| true));
+    /// assert!(!bvh.occluded_filtered::<Watertight, _>(&tris[..], &ray, |_: &Hit| false));
+    /// ```
+    #[inline]
+    pub fn occluded_filtered<T: TriangleTest, P: Triangles + ?Sized>(
+        &self,
+        tris: &P,
+        ray: &Ray,
+        filter: impl crate::traverse::HitFilter,
+    ) -> bool {
+        crate::traverse::occluded_scalar_filtered::<T, P, _>(self.view(), tris, ray, filter)
+    }
 }

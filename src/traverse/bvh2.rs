@@ -1,6 +1,6 @@
 //! Scalar closest-hit and any-hit traversal of a binary BVH (see the [module docs](super)).
 
-use super::{Bvh2Ref, Node, STACK_SIZE, TriangleTest, beyond, node_scalar, prepare};
+use super::{AcceptAll, Bvh2Ref, HitFilter, Node, STACK_SIZE, TriangleTest, beyond, node_scalar, prepare};
 use crate::geometry::{Hit, Ray, Triangles};
 use crate::intersect::PreparedRay;
 
@@ -21,7 +21,30 @@ use crate::intersect::PreparedRay;
 /// ```
 #[inline]
 pub fn intersect_scalar<T: TriangleTest, P: Triangles + ?Sized>(bvh: Bvh2Ref<'_>, tris: &P, ray: &Ray) -> Option<Hit> {
-    walk::<T, P, false>(bvh, tris, ray)
+    walk::<T, P, AcceptAll, false>(bvh, tris, ray, &mut AcceptAll)
+}
+
+/// [`intersect_scalar`] counting only the hits `filter` accepts ([`HitFilter`]): the nearest
+/// accepted hit. The reference the wide BVHs' filtered traversals are tested against.
+///
+/// ```
+/// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}};
+/// use strahl::traverse::{Moller, intersect_scalar_filtered};
+/// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+/// let tris = [tri(5.0), tri(3.0), tri(4.0)];
+/// let (bvh, _) = Bvh2::build(&tris[..], &BuildParams::quality()).unwrap();
+/// let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+/// let hit = intersect_scalar_filtered::<Moller, _, _>(bvh.view(), &tris[..], &ray, |h: &Hit| h.prim != 1);
+/// assert_eq!(hit.map(|h| (h.t, h.prim)), Some((4.0, 2))); // through triangle 1
+/// ```
+#[inline]
+pub fn intersect_scalar_filtered<T: TriangleTest, P: Triangles + ?Sized, F: HitFilter>(
+    bvh: Bvh2Ref<'_>,
+    tris: &P,
+    ray: &Ray,
+    mut filter: F,
+) -> Option<Hit> {
+    walk::<T, P, F, false>(bvh, tris, ray, &mut filter)
 }
 
 /// `true` if `ray` hits anything in the tree within `[tmin, tmax)` (any-hit; scalar reference).
@@ -40,12 +63,40 @@ pub fn intersect_scalar<T: TriangleTest, P: Triangles + ?Sized>(bvh: Bvh2Ref<'_>
 /// ```
 #[inline]
 pub fn occluded_scalar<T: TriangleTest, P: Triangles + ?Sized>(bvh: Bvh2Ref<'_>, tris: &P, ray: &Ray) -> bool {
-    walk::<T, P, true>(bvh, tris, ray).is_some()
+    walk::<T, P, AcceptAll, true>(bvh, tris, ray, &mut AcceptAll).is_some()
 }
 
-/// The traversal loop. `ANY`: return the first hit found instead of the closest.
+/// [`occluded_scalar`] counting only the hits `filter` accepts ([`HitFilter`]): `true` if one is.
+///
+/// ```
+/// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, scene};
+/// use strahl::traverse::{Watertight, occluded_scalar_filtered};
+/// let mesh = scene::icosphere(1);
+/// let tris = mesh.as_indexed();
+/// let (bvh, _) = Bvh2::build(&tris, &BuildParams::fastest()).unwrap();
+/// let toward = Ray::new(Vec3::new(0.0, 0.0, -3.0), Vec3::Z);
+/// assert!(occluded_scalar_filtered::<Watertight, _, _>(bvh.view(), &tris, &toward, |_: &Hit| true));
+/// assert!(!occluded_scalar_filtered::<Watertight, _, _>(bvh.view(), &tris, &toward, |_: &Hit| false));
+/// ```
+#[inline]
+pub fn occluded_scalar_filtered<T: TriangleTest, P: Triangles + ?Sized, F: HitFilter>(
+    bvh: Bvh2Ref<'_>,
+    tris: &P,
+    ray: &Ray,
+    mut filter: F,
+) -> bool {
+    walk::<T, P, F, true>(bvh, tris, ray, &mut filter).is_some()
+}
+
+/// The traversal loop. `ANY`: return the first hit found instead of the closest. Only hits `f`
+/// accepts count.
 #[inline(always)]
-fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_>, tris: &P, ray: &Ray) -> Option<Hit> {
+fn walk<T: TriangleTest, P: Triangles + ?Sized, F: HitFilter, const ANY: bool>(
+    bvh: Bvh2Ref<'_>,
+    tris: &P,
+    ray: &Ray,
+    f: &mut F,
+) -> Option<Hit> {
     let nodes = bvh.nodes;
     let mut r = prepare::<T>(ray);
     let root = nodes.first()?;
@@ -60,7 +111,7 @@ fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_
     let mut budget = nodes.len();
     loop {
         if budget == 0 {
-            return linear_rest::<T, P, ANY>(bvh, tris, r, best);
+            return linear_rest::<T, P, F, ANY>(bvh, tris, r, best, f);
         }
         budget -= 1;
         if node.is_leaf() {
@@ -70,6 +121,7 @@ fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_
                 };
                 if let Some(tri) = tris.triangle(prim as usize)
                     && let Some(h) = T::intersect(&r, &tri, prim)
+                    && (F::ACCEPTS_ALL || f.accept(&h))
                 {
                     if ANY {
                         return Some(h);
@@ -89,7 +141,7 @@ fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_
                     let (near, far, far_t) = if tr < tl { (rn, li, tl) } else { (ln, ri, tr) };
                     if sp == STACK_SIZE {
                         // NOTE: only a tree deeper than the builders make gets here.
-                        return linear_rest::<T, P, ANY>(bvh, tris, r, best);
+                        return linear_rest::<T, P, F, ANY>(bvh, tris, r, best, f);
                     }
                     stack[sp] = (far, far_t);
                     sp += 1;
@@ -130,15 +182,17 @@ fn walk<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(bvh: Bvh2Ref<'_
 /// primitive the tree references, with the current `tmax`.
 #[cold]
 #[inline(never)]
-fn linear_rest<T: TriangleTest, P: Triangles + ?Sized, const ANY: bool>(
+fn linear_rest<T: TriangleTest, P: Triangles + ?Sized, F: HitFilter, const ANY: bool>(
     bvh: Bvh2Ref<'_>,
     tris: &P,
     mut r: PreparedRay,
     mut best: Option<Hit>,
+    f: &mut F,
 ) -> Option<Hit> {
     for &prim in bvh.prim_indices {
         if let Some(tri) = tris.triangle(prim as usize)
             && let Some(h) = T::intersect(&r, &tri, prim)
+            && (F::ACCEPTS_ALL || f.accept(&h))
         {
             if ANY {
                 return Some(h);

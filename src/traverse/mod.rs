@@ -26,6 +26,13 @@
 //! generic over it, so the test is inlined into the leaf loop:
 //! `intersect_scalar::<Watertight, _>(bvh, &tris, &ray)`.
 //!
+//! # Hit filters
+//! Every single-ray traversal has a `*_filtered` form taking a [`HitFilter`] (any closure
+//! `FnMut(&Hit) -> bool`): only the hits it accepts count, as with Embree's intersection filter
+//! functions (alpha tests, masks, skipping the triangle a ray leaves from). The filter is a type
+//! parameter, inlined like the triangle test: `intersect_scalar_filtered::<Watertight, _, _>(bvh,
+//! &tris, &ray, |h: &Hit| h.prim != origin_prim)`.
+//!
 //! # Depth and the stack
 //! The stack holds [`STACK_SIZE`] entries, enough for any tree of depth `STACK_SIZE + 1` or less;
 //! every builder in [`build`](crate::build) caps the depth at
@@ -58,8 +65,10 @@ pub mod packet;
 pub(crate) mod stack;
 pub mod wide;
 
-pub use brute::{intersect_brute_force, occluded_brute_force};
-pub use bvh2::{intersect_scalar, occluded_scalar};
+pub use brute::{
+    intersect_brute_force, intersect_brute_force_filtered, occluded_brute_force, occluded_brute_force_filtered,
+};
+pub use bvh2::{intersect_scalar, intersect_scalar_filtered, occluded_scalar, occluded_scalar_filtered};
 pub use node::{Bvh2Ref, Node};
 
 use crate::geometry::{Hit, Triangle};
@@ -334,6 +343,119 @@ impl<T: TriangleTest, const CONSERVATIVE: bool> TriangleTest for WithBoxes<T, CO
         packs: &[TriangleLanes<L, N>],
     ) -> Option<(u32, R, R, R, R)> {
         T::closest_packet_leaf(origin, direction, tmin, tmax, packs)
+    }
+}
+
+/// A test each candidate hit must pass to count, as Embree's intersection filter functions:
+/// alpha-tested leaves (a texture lookup at the hit's `u`, `v`), skipping the triangle a
+/// secondary ray leaves from, masks by primitive. The single-ray traversals take one in their
+/// `*_filtered` forms ([`BvhWide::intersect_filtered`](crate::layout::BvhWide::intersect_filtered),
+/// [`BvhWide::occluded_filtered`](crate::layout::BvhWide::occluded_filtered),
+/// [`wide::intersect_filtered`], [`intersect_scalar_filtered`], [`intersect_brute_force_filtered`],
+/// and their any-hit forms); every closure `FnMut(&Hit) -> bool` is one.
+///
+/// The closest hit is then the nearest hit the filter accepts (ties as without a filter), and
+/// an any-hit query reports whether some hit is accepted. The traversals offer hits in no fixed
+/// order, and may offer a hit more than once or offer hits beyond the answer, so the filter
+/// should be a function of the hit (its `prim`, `t`, `u`, `v`): then every traversal, width and
+/// the brute-force reference give the same answer. A rejected hit costs a second triangle test
+/// of its pack; an accepted one costs one call. The monomorphised traversals without a filter
+/// ([`AcceptAll`]) are the unfiltered ones, with no call and no test.
+///
+/// ```
+/// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{HitFilter, Watertight}};
+/// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+/// let tris = [tri(2.0), tri(3.0), tri(4.0)];
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+/// // Triangle 0 is a cut-out (say, an alpha-tested leaf): the ray goes through it.
+/// let hit = b8.intersect_filtered::<Watertight>(&ray, |h: &Hit| h.prim != 0).unwrap();
+/// assert_eq!((hit.prim, hit.t), (1, 3.0));
+/// // A filter with state: count the candidates it was offered.
+/// let mut offered = 0;
+/// assert!(!b8.occluded_filtered::<Watertight>(&ray, |_: &Hit| {
+///     offered += 1;
+///     false // every hit rejected
+/// }));
+/// assert_eq!(offered, 3);
+/// // Or a type of its own: a mask of primitives.
+/// struct Mask<'a>(&'a [bool]);
+/// impl HitFilter for Mask<'_> {
+///     fn accept(&mut self, hit: &Hit) -> bool {
+///         self.0.get(hit.prim as usize).copied().unwrap_or(false)
+///     }
+/// }
+/// let hit = b8.intersect_filtered::<Watertight>(&ray, Mask(&[false, false, true])).unwrap();
+/// assert_eq!(hit.prim, 2);
+/// ```
+pub trait HitFilter {
+    /// `true` if every hit passes without a call ([`AcceptAll`]): the traversals then skip the
+    /// filter altogether. Leave it `false`.
+    const ACCEPTS_ALL: bool = false;
+    /// `true` if `hit` counts.
+    fn accept(&mut self, hit: &Hit) -> bool;
+}
+
+/// The filter that accepts every hit, without being called: what the unfiltered traversals use.
+///
+/// ```
+/// use strahl::{Hit, traverse::{AcceptAll, HitFilter}};
+/// assert!(AcceptAll::ACCEPTS_ALL && AcceptAll.accept(&Hit::NONE));
+/// ```
+#[derive(Clone, Copy, Debug, Default)]
+pub struct AcceptAll;
+
+impl HitFilter for AcceptAll {
+    const ACCEPTS_ALL: bool = true;
+    #[inline(always)]
+    fn accept(&mut self, _: &Hit) -> bool {
+        true
+    }
+}
+
+impl<F: FnMut(&Hit) -> bool> HitFilter for F {
+    #[inline(always)]
+    fn accept(&mut self, hit: &Hit) -> bool {
+        self(hit)
+    }
+}
+
+/// The closest hit of `r` in `pack` that `f` accepts (ties: the lowest lane).
+#[inline(always)]
+pub(crate) fn closest_in_pack<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+    r: &PreparedRay,
+    pack: &TriangleLanes<L, N>,
+    f: &mut F,
+) -> Option<Hit> {
+    let h = T::intersect_lanes(r, pack)?;
+    if F::ACCEPTS_ALL || f.accept(&h) {
+        return Some(h);
+    }
+    next_accepted::<T, L, N, F>(r, pack, h, f)
+}
+
+/// [`closest_in_pack`] after `rejected`: the pack tested again without the lane that gave it,
+/// until a hit is accepted or none is left (at most `N` tests).
+#[cold]
+#[inline(never)]
+fn next_accepted<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+    r: &PreparedRay,
+    pack: &TriangleLanes<L, N>,
+    rejected: Hit,
+    f: &mut F,
+) -> Option<Hit> {
+    let mut rest = *pack;
+    let mut h = rejected;
+    loop {
+        // The lowest valid lane with the rejected hit's primitive (the one the kernel reports
+        // among tied lanes); a malformed pack that repeats a primitive only loses a candidate.
+        let lane = (0..N.min(32)).find(|&i| rest.valid >> i & 1 == 1 && rest.prim[i] == h.prim)?;
+        rest.valid &= !(1 << lane);
+        h = T::intersect_lanes(r, &rest)?;
+        if f.accept(&h) {
+            return Some(h);
+        }
     }
 }
 

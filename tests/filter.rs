@@ -1,0 +1,206 @@
+//! Hit filters (`traverse::HitFilter`): the filtered closest and any hit of BVH2 (scalar
+//! reference), BVH4 and BVH8 equal filtered brute force on random, clustered, mesh and
+//! adversarial scenes, for filters by primitive, by barycentric (an alpha test), by distance,
+//! none and all; malformed packs and filters with state.
+
+mod common;
+
+use common::{mixed_rays, same};
+use strahl::build::{BuildParams, Bvh2};
+use strahl::geometry::{Hit, Triangle};
+use strahl::layout::{Bvh4, Bvh8, BvhWideRef};
+use strahl::scene::{self, Rng};
+use strahl::traverse::{
+    Moller, TriangleTest, Watertight, intersect_brute_force, intersect_brute_force_filtered,
+    occluded_brute_force_filtered, wide,
+};
+use strahl::{Ray, Vec3};
+
+/// A filter under test (a function of the hit).
+type Filter = fn(&Hit) -> bool;
+
+/// The filters under test, by name.
+fn filters() -> [(&'static str, Filter); 5] {
+    [
+        ("even primitives", |h| h.prim % 2 == 0),
+        ("alpha stripes in u", |h| (h.u * 7.0).fract() < 0.5),
+        ("beyond t = 2", |h| h.t > 2.0),
+        ("all", |_| true),
+        ("none", |_| false),
+    ]
+}
+
+fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) -> usize {
+    let rays = mixed_rays(tris, n_rays, 13);
+    let mut filtered_out = 0;
+    for (pname, params) in [
+        ("fastest", BuildParams::fastest()),
+        ("fast", BuildParams::fast()),
+        ("quality", BuildParams::quality()),
+    ] {
+        let (b2, _) = Bvh2::build(tris, &params).unwrap();
+        let b4 = Bvh4::from_bvh2(&b2, tris).unwrap();
+        let b8 = Bvh8::from_bvh2(&b2, tris).unwrap();
+        for (fname, f) in filters() {
+            let what = format!("{name} / {pname} / {} / {fname}", T::NAME);
+            for ray in &rays {
+                let want = intersect_brute_force_filtered::<T, _, _>(tris, ray, f);
+                if let Some(h) = want {
+                    assert!(f(&h), "{what}: brute force returned a rejected hit");
+                }
+                let got = [
+                    b2.intersect_filtered::<T, _>(tris, ray, f),
+                    b4.intersect_filtered::<T>(ray, f),
+                    b8.intersect_filtered::<T>(ray, f),
+                ];
+                for (k, g) in got.into_iter().enumerate() {
+                    same(g, want, tris, ray, &format!("{what}: tree {k}"));
+                    assert!(g.is_none_or(|h| f(&h)), "{what}: tree {k} returned a rejected hit");
+                }
+                let any = occluded_brute_force_filtered::<T, _, _>(tris, ray, f);
+                assert_eq!(any, want.is_some(), "{what}: brute-force any hit");
+                assert_eq!(
+                    b2.occluded_filtered::<T, _>(tris, ray, f),
+                    any,
+                    "{what}: BVH2 any hit {ray:?}"
+                );
+                assert_eq!(b4.occluded_filtered::<T>(ray, f), any, "{what}: BVH4 any hit {ray:?}");
+                assert_eq!(b8.occluded_filtered::<T>(ray, f), any, "{what}: BVH8 any hit {ray:?}");
+                // Accepting every hit is the unfiltered traversal.
+                if fname == "all" {
+                    assert_eq!(got[2], b8.intersect::<T>(ray), "{what}");
+                    assert_eq!(any, b8.occluded::<T>(ray), "{what}");
+                }
+                let plain = intersect_brute_force::<T, _>(tris, ray);
+                filtered_out += usize::from(plain.is_some() && plain != want);
+            }
+        }
+    }
+    filtered_out
+}
+
+fn random_soup(n: usize, seed: u64) -> Vec<Triangle> {
+    let mut rng = Rng::new(seed);
+    (0..n)
+        .map(|_| {
+            let c = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 10.0;
+            [
+                c + rng.unit_vector() * 0.3,
+                c + rng.unit_vector() * 0.3,
+                c + rng.unit_vector() * 0.3,
+            ]
+        })
+        .collect()
+}
+
+#[test]
+fn filtered_hits_equal_filtered_brute_force() {
+    // Each scene must see filters change answers, or the comparison says little.
+    let soup = random_soup(2000, 1);
+    assert!(check_scene::<Watertight>("random soup", &soup, 300) > 100);
+    assert!(check_scene::<Moller>("random soup", &soup, 300) > 100);
+    assert!(check_scene::<Watertight>("clustered", &scene::clustered_soup(2000, 5, 2), 300) > 100);
+    // A closed mesh: behind a rejected front face lies a back face to find.
+    assert!(check_scene::<Watertight>("bunny", &scene::bunny().to_soup(), 300) > 100);
+}
+
+#[test]
+fn filtered_hits_on_adversarial_scenes() {
+    let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    // Identical triangles: every hit ties, and the filter picks among the tied ones.
+    check_scene::<Watertight>("same triangle x 300", &vec![t; 300], 100);
+    // Stacked coplanar layers, several per pack.
+    let layers: Vec<Triangle> = (0..64)
+        .map(|i| t.map(|v| v + Vec3::Z * (i / 4) as f32 * 0.25))
+        .collect();
+    assert!(check_scene::<Moller>("stacked layers", &layers, 200) > 10);
+    // Degenerate, NaN and infinite triangles mixed in.
+    let mut bad = random_soup(400, 4);
+    bad.push([Vec3::ZERO, Vec3::X, Vec3::X * 2.0]);
+    bad.push([Vec3::NAN, Vec3::X, Vec3::Y]);
+    bad.push([Vec3::splat(f32::INFINITY), Vec3::X, Vec3::Y]);
+    check_scene::<Watertight>("with degenerate and non-finite", &bad, 200);
+    // Empty scene, and rays that are not rays.
+    let none: Vec<Triangle> = Vec::new();
+    let (b2, _) = Bvh2::build(&none[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &none[..]).unwrap();
+    let ray = Ray::new(Vec3::ZERO, Vec3::X);
+    assert!(
+        b8.intersect_filtered::<Watertight>(&ray, |_: &Hit| panic!("offered a hit in an empty scene"))
+            .is_none()
+    );
+    let (b2, _) = Bvh2::build(&[t][..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &[t][..]).unwrap();
+    for bad in [
+        Ray::new(Vec3::NAN, Vec3::Z),
+        Ray::new(Vec3::new(0.2, 0.2, -1.0), Vec3::ZERO),
+        Ray::new(Vec3::new(0.2, 0.2, -1.0), Vec3::splat(f32::NAN)),
+    ] {
+        let never = |_: &Hit| panic!("offered a hit for {bad:?}");
+        assert!(b8.intersect_filtered::<Watertight>(&bad, never).is_none());
+        assert!(!b8.occluded_filtered::<Watertight>(&bad, never));
+        assert!(!b2.occluded_filtered::<Watertight, _>(&[t][..], &bad, never));
+    }
+}
+
+/// A filter with state sees every candidate it decides on, and nothing rejected comes back; in
+/// a pack whose lanes all report the same primitive (a malformed view), rejecting it ends after
+/// at most one test per lane.
+#[test]
+fn stateful_filters_and_malformed_packs() {
+    let tris = scene::icosphere(2).to_soup();
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    // From inside the sphere: exactly one triangle is hit (or two or three at an edge), and a
+    // filter that rejects everything is offered each at least once.
+    let mut rng = Rng::new(3);
+    for _ in 0..200 {
+        let ray = Ray::new(Vec3::ZERO, rng.unit_vector());
+        let mut offered = Vec::new();
+        let hit = b8.intersect_filtered::<Watertight>(&ray, |h: &Hit| {
+            offered.push(h.prim);
+            false
+        });
+        assert!(hit.is_none());
+        let plain = b8.intersect::<Watertight>(&ray).unwrap();
+        assert!(offered.contains(&plain.prim), "{offered:?} lacks {}", plain.prim);
+        // Counting calls: accepting the first hit offered takes one call.
+        let mut calls = 0;
+        let first = b8.intersect_filtered::<Watertight>(&ray, |_: &Hit| {
+            calls += 1;
+            true
+        });
+        assert_eq!(first, Some(plain));
+        assert!(calls >= 1);
+    }
+    // Every lane of every pack reports primitive 0.
+    let mut packs = b8.packs().to_vec();
+    for p in &mut packs {
+        p.prim = [0; 8];
+    }
+    let view = BvhWideRef {
+        nodes: b8.nodes(),
+        packs: &packs,
+    };
+    for _ in 0..50 {
+        let ray = Ray::new(
+            Vec3::new(0.0, 0.0, -3.0),
+            Vec3::new(0.1 * rng.f32(), 0.1 * rng.f32(), 1.0),
+        );
+        let mut calls = 0;
+        let hit = wide::intersect_filtered::<Watertight, _, 8, _>(view, &ray, |_: &Hit| {
+            calls += 1;
+            false
+        });
+        assert!(hit.is_none());
+        assert!(calls >= 1 && calls <= 8 * packs.len(), "{calls} calls");
+        assert!(!wide::occluded_filtered::<Watertight, _, 8, _>(
+            view,
+            &ray,
+            |h: &Hit| h.prim != 0
+        ));
+        // Accepting hits beyond the front of the sphere finds the back.
+        let back = wide::intersect_filtered::<Watertight, _, 8, _>(view, &ray, |h: &Hit| h.t > 3.0);
+        assert!(back.is_some_and(|h| h.t > 3.5), "{back:?}");
+    }
+}
