@@ -10,7 +10,10 @@
 //! (`scene::terrain(724, 1)`, 1M triangles, 5:1 flat), `sphereflake` (`scene::sphereflake(3, 3)`)
 //! or `bunny`. `STRAHL_THREADS=t` (t > 1) also times `Builder::build_into_par` on `t`
 //! threads right after each builder's single-threaded builds (taking turns with them), with its
-//! speed-up; "CPU" is then the calling thread's only.
+//! speed-up; "CPU" is then the calling thread's only. `STRAHL_CUSTOM=bins,axes,sample[,hybrid[,cluster]]`
+//! adds a member `custom`: `balanced()` (or `hybrid_sah()` with `hybrid`) with those bins, axes
+//! (`all`, `longest`, `allbutsmall`), `bin_sample` and cluster size, for trying points between
+//! the presets.
 
 use std::time::Instant;
 use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy};
