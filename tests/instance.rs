@@ -9,7 +9,7 @@ use strahl::geometry::{Hit, Triangle};
 use strahl::layout::{BvhWide, Instance, InstanceHit, Tlas};
 use strahl::math::Lane;
 use strahl::scene::{self, Rng};
-use strahl::traverse::{Fast, Moller, TriangleTest, Watertight, intersect_brute_force};
+use strahl::traverse::{Fast, Moller, TriangleTest, Watertight, intersect_brute_force, intersect_brute_force_filtered};
 use strahl::{Ray, Vec3};
 
 /// The bottom-level meshes: the bunny, an icosphere and a clustered soup.
@@ -86,8 +86,23 @@ fn rays(n: usize, inst: &[Instance], spread: f32, seed: u64) -> Vec<Ray> {
 /// the TLAS makes) against all of its BLAS's triangles by brute force; the smallest `t` wins
 /// (ties between instances: the lower index, which the check below allows either way).
 fn reference<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], ray: &Ray) -> Option<InstanceHit> {
+    reference_filtered::<T>(meshes, inst, None, ray, &|_| true)
+}
+
+/// [`reference`] counting only the hits `f` accepts (`Tlas::intersect_filtered`), over instance
+/// `only` alone if given (indices kept).
+fn reference_filtered<T: TriangleTest>(
+    meshes: &[Vec<Triangle>],
+    inst: &[Instance],
+    only: Option<usize>,
+    ray: &Ray,
+    f: &dyn Fn(&InstanceHit) -> bool,
+) -> Option<InstanceHit> {
     let mut best: Option<InstanceHit> = None;
     for (i, x) in inst.iter().enumerate() {
+        if only.is_some_and(|o| o != i) {
+            continue;
+        }
         let m = x.transform;
         if !(m.matrix3.is_finite() && m.translation.is_finite() && m.matrix3.determinant().abs().is_normal()) {
             continue;
@@ -102,7 +117,13 @@ fn reference<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], ray: 
             direction: inv.transform_vector3(ray.direction),
             tmax: ray.tmax,
         };
-        if let Some(h) = intersect_brute_force::<T, _>(&tris[..], &local)
+        let keep = |h: &Hit| {
+            f(&InstanceHit {
+                hit: *h,
+                instance: i as u32,
+            })
+        };
+        if let Some(h) = intersect_brute_force_filtered::<T, _, _>(&tris[..], &local, keep)
             && best.is_none_or(|b| h.t < b.hit.t)
         {
             best = Some(InstanceHit {
@@ -124,6 +145,19 @@ fn same<T: TriangleTest>(
     ray: &Ray,
     what: &str,
 ) {
+    same_filtered::<T>(got, want, meshes, inst, ray, what, &|_| true);
+}
+
+/// [`same`] for hits filtered by `f`.
+fn same_filtered<T: TriangleTest>(
+    got: Option<InstanceHit>,
+    want: Option<InstanceHit>,
+    meshes: &[Vec<Triangle>],
+    inst: &[Instance],
+    ray: &Ray,
+    what: &str,
+    f: &dyn Fn(&InstanceHit) -> bool,
+) {
     match (got, want) {
         (None, None) => {}
         (Some(g), Some(w)) => {
@@ -134,7 +168,8 @@ fn same<T: TriangleTest>(
             );
             if (g.instance, g.hit.prim) != (w.instance, w.hit.prim) {
                 // A tie: the instance we got must reach exactly this t on its own.
-                let one = reference::<T>(meshes, &inst[g.instance as usize..=g.instance as usize], ray);
+                let one = reference_filtered::<T>(meshes, inst, Some(g.instance as usize), ray, f);
+                assert!(f(&g), "{what}: a rejected hit {g:?}");
                 assert_eq!(
                     one.map(|h| h.hit.t.to_bits()),
                     Some(g.hit.t.to_bits()),
@@ -153,6 +188,7 @@ fn check<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], rays: &[R
     let tlas4 = Tlas::build(inst, &b4).unwrap();
     assert_eq!((tlas8.instances(), tlas8.left_out()), (inst.len(), 0));
     let mut hits = 0;
+    let mut filtered_out = 0;
     for ray in rays {
         let want = reference::<T>(meshes, inst, ray);
         let got8 = tlas8.intersect::<T, _, 8>(&b8, ray);
@@ -169,6 +205,28 @@ fn check<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], rays: &[R
             want.is_some(),
             "{what}: occluded {ray:?}"
         );
+        // A hit filter over instances and primitives (an alpha test by instance): the nearest
+        // accepted hit, BVH8 and BVH4 BLASes.
+        let keep = |h: &InstanceHit| !(h.instance + h.hit.prim).is_multiple_of(3);
+        let want_kept = reference_filtered::<T>(meshes, inst, None, ray, &keep);
+        let got_kept = [
+            tlas8.intersect_filtered::<T, _, 8>(&b8, ray, keep),
+            tlas4.intersect_filtered::<T, _, 4>(&b4, ray, keep),
+        ];
+        for g in got_kept {
+            same_filtered::<T>(g, want_kept, meshes, inst, ray, &format!("{what} filtered"), &keep);
+        }
+        assert_eq!(
+            tlas8.occluded_filtered::<T, _, 8>(&b8, ray, keep),
+            want_kept.is_some(),
+            "{what}: filtered occluded {ray:?}"
+        );
+        assert_eq!(
+            tlas4.occluded_filtered::<T, _, 4>(&b4, ray, keep),
+            want_kept.is_some(),
+            "{what}: filtered occluded {ray:?}"
+        );
+        filtered_out += usize::from(want.is_some() && want_kept != want);
         // The fast slab test only misses: a hit it reports is never closer than the exact one.
         if let Some(f) = tlas8.intersect::<Fast<T>, _, 8>(&b8, ray) {
             let w = want.unwrap_or_else(|| panic!("{what}: fast {f:?}, reference none"));
@@ -187,6 +245,11 @@ fn check<T: TriangleTest>(meshes: &[Vec<Triangle>], inst: &[Instance], rays: &[R
     tlas8.occluded_batch::<T, _, 8>(&b8, rays, &mut ob);
     tlas8.occluded_batch_par::<T, _, 8>(&b8, rays, &mut op, 3);
     assert_eq!((&ob, &op), (&occ, &occ), "{what}: occluded batches");
+    // The filter changed answers, or its comparison says little.
+    assert!(
+        filtered_out * 5 >= hits,
+        "{what}: the filter changed {filtered_out} of {hits} hits"
+    );
     hits
 }
 

@@ -389,12 +389,16 @@ impl<T: TriangleTest, const CONSERVATIVE: bool> TriangleTest for WithBoxes<T, CO
 /// let hit = b8.intersect_filtered::<Watertight>(&ray, Mask(&[false, false, true])).unwrap();
 /// assert_eq!(hit.prim, 2);
 /// ```
-pub trait HitFilter {
+///
+/// The hit type `H` is [`Hit`] for the traversals of one tree and
+/// [`InstanceHit`](crate::layout::InstanceHit) (the hit and its instance) for
+/// [`Tlas::intersect_filtered`](crate::layout::Tlas::intersect_filtered).
+pub trait HitFilter<H = Hit> {
     /// `true` if every hit passes without a call ([`AcceptAll`]): the traversals then skip the
     /// filter altogether. Leave it `false`.
     const ACCEPTS_ALL: bool = false;
     /// `true` if `hit` counts.
-    fn accept(&mut self, hit: &Hit) -> bool;
+    fn accept(&mut self, hit: &H) -> bool;
 }
 
 /// The filter that accepts every hit, without being called: what the unfiltered traversals use.
@@ -406,17 +410,17 @@ pub trait HitFilter {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct AcceptAll;
 
-impl HitFilter for AcceptAll {
+impl<H> HitFilter<H> for AcceptAll {
     const ACCEPTS_ALL: bool = true;
     #[inline(always)]
-    fn accept(&mut self, _: &Hit) -> bool {
+    fn accept(&mut self, _: &H) -> bool {
         true
     }
 }
 
-impl<F: FnMut(&Hit) -> bool> HitFilter for F {
+impl<H, F: FnMut(&H) -> bool> HitFilter<H> for F {
     #[inline(always)]
-    fn accept(&mut self, hit: &Hit) -> bool {
+    fn accept(&mut self, hit: &H) -> bool {
         self(hit)
     }
 }

@@ -94,7 +94,7 @@ pub fn intersect_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter
     if r.is_empty() || bvh.nodes.is_empty() {
         return None;
     }
-    ClosestWalk::<STACK>::new(bvh, 0).finish::<T, L, N, F>(bvh, &mut r, &mut filter)
+    intersect_from_filtered::<T, L, N, F>(bvh, 0, &mut r, &mut filter)
 }
 
 /// [`occluded`] counting only the hits `filter` accepts ([`HitFilter`]): `true` if `ray` hits,
@@ -116,11 +116,7 @@ pub fn occluded_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>
     ray: &Ray,
     mut filter: F,
 ) -> bool {
-    let r = prepare::<T>(ray);
-    if r.is_empty() || bvh.nodes.is_empty() {
-        return false;
-    }
-    AnyHitWalk::<STACK>::new(bvh, &r).finish::<T, L, N, F>(bvh, &r, &mut filter)
+    occluded_prepared_filtered::<T, L, N, F>(bvh, &prepare::<T>(ray), &mut filter)
 }
 
 /// Closest hit of the prepared ray `r` in the subtree below child code `start` (a node index or a
@@ -145,7 +141,18 @@ pub fn intersect_from<T: TriangleTest, L: Lane, const N: usize>(
     start: u32,
     r: &mut PreparedRay,
 ) -> Option<Hit> {
-    ClosestWalk::<STACK>::new(bvh, start).finish::<T, L, N, _>(bvh, r, &mut AcceptAll)
+    intersect_from_filtered::<T, L, N, _>(bvh, start, r, &mut AcceptAll)
+}
+
+/// [`intersect_from`] counting only the hits `f` accepts (the instances' BLAS walks).
+#[inline]
+pub(crate) fn intersect_from_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+    bvh: BvhWideRef<'_, L, N>,
+    start: u32,
+    r: &mut PreparedRay,
+    f: &mut F,
+) -> Option<Hit> {
+    ClosestWalk::<STACK>::new(bvh, start).finish::<T, L, N, F>(bvh, r, f)
 }
 
 /// One ray's closest-hit walk, advanced one node or leaf at a time ([`step`](Self::step)), as
@@ -379,9 +386,6 @@ pub fn occluded<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L,
 /// ```
 #[inline]
 pub fn occluded_prepared<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, r: &PreparedRay) -> bool {
-    if r.is_empty() || bvh.nodes.is_empty() {
-        return false;
-    }
     // Children are visited in slot order, not near to far (as Embree's any-hit traversal does):
     // a shadow ray starts at a surface, and the nearest child is mostly the geometry around its
     // origin, which it leaves without a hit. Measured on shadow rays to random points (BVH8,
@@ -390,7 +394,20 @@ pub fn occluded_prepared<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideR
     // children a random ray most likely hits first (another 1.15x on the sphereflake).
     // Nearest child first, the rest in slot order, measured 6% faster on the bunny (in cache)
     // but 1.45x slower on the sphereflake: not kept.
-    AnyHitWalk::<STACK>::new(bvh, r).finish::<T, L, N, _>(bvh, r, &mut AcceptAll)
+    occluded_prepared_filtered::<T, L, N, _>(bvh, r, &mut AcceptAll)
+}
+
+/// [`occluded_prepared`] counting only the hits `f` accepts (the instances' BLAS walks).
+#[inline]
+pub(crate) fn occluded_prepared_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+    bvh: BvhWideRef<'_, L, N>,
+    r: &PreparedRay,
+    f: &mut F,
+) -> bool {
+    if r.is_empty() || bvh.nodes.is_empty() {
+        return false;
+    }
+    AnyHitWalk::<STACK>::new(bvh, r).finish::<T, L, N, F>(bvh, r, f)
 }
 
 /// One ray's any-hit walk, advanced one node or leaf at a time ([`step`](Self::step)), so that
