@@ -1,10 +1,11 @@
 //! The main job: build a BVH, collapse it to BVH8, and render primary rays with normal shading
 //! plus ambient occlusion (any-hit rays), multithreaded over image tiles, into PNGs; print what
 //! was measured. The third built-in scene is instanced: 36 bunnies placed by a TLAS over one
-//! BVH8 (single rays there: packets do not go through instances).
+//! BVH8 (single rays there: packets do not go through instances). The fourth is the bunny with
+//! holes cut by an alpha mask, a hit filter (`HitFilter`) on every primary and AO ray.
 //!
 //! ```sh
-//! cargo run --release --example render                 # the bundled bunny, a sphereflake, 36 bunny instances
+//! cargo run --release --example render                 # the bundled bunny, a sphereflake, 36 bunny instances, a cut-out bunny
 //! cargo run --release --example render -- model.obj    # your OBJ file
 //! ```
 //! Options after the path: `--size WxH`, `--ao N` (AO rays per pixel, default 8), `--threads T`.
@@ -98,6 +99,47 @@ impl Tracer for Flat {
     }
 }
 
+/// A BVH8 whose triangles are cut out by an alpha mask: a hit filter (`strahl::traverse::HitFilter`) keeps a hit
+/// only outside a lattice of spherical holes around its surface point, for primary and AO rays
+/// alike, so light passes through the holes as the camera's rays do.
+struct Cutout {
+    bvh: Bvh8,
+    tris: Vec<Triangle>,
+    /// Lattice cells per unit of length.
+    freq: f32,
+}
+
+impl Cutout {
+    /// The alpha test: `true` (opaque) outside a hole of radius 0.3 cells around each lattice point.
+    fn opaque(&self, hit: &Hit) -> bool {
+        let Some(tri) = self.tris.get(hit.prim as usize) else {
+            return false;
+        };
+        let q = hit_point(tri, hit) * self.freq;
+        (q - q.round()).length() > 0.3
+    }
+}
+
+impl Tracer for Cutout {
+    fn primary(&self, rays: &[Ray], out: &mut [Option<(Hit, u32)>]) {
+        // Single rays: the filtered traversal (packets take no filter).
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self
+                .bvh
+                .intersect_filtered::<Watertight>(r, |h: &Hit| self.opaque(h))
+                .map(|h| (h, 0));
+        }
+    }
+    fn occluded(&self, rays: &[Ray], out: &mut [bool]) {
+        for (o, r) in out.iter_mut().zip(rays) {
+            *o = self.bvh.occluded_filtered::<Watertight>(r, |h: &Hit| self.opaque(h));
+        }
+    }
+    fn triangle(&self, hit: &Hit, _: u32) -> Option<Triangle> {
+        self.tris[..].triangle(hit.prim as usize)
+    }
+}
+
 struct Instanced {
     tlas: Tlas,
     blases: [Bvh8; 1],
@@ -167,6 +209,21 @@ fn render(name: &str, mesh: &Mesh, o: &Options) {
     };
     let bounds = bvh2.bounds();
     shade(name, &Flat { bvh, tris }, &bounds, o);
+}
+
+/// `mesh` with holes cut by an alpha mask (a hit filter): `cells` lattice cells across its bounds.
+fn render_cutout(name: &str, mesh: &Mesh, cells: f32, o: &Options) {
+    let tris: Vec<Triangle> = mesh.to_soup();
+    println!(
+        "\n== {name}: {} triangles, alpha-tested holes (a hit filter on every ray)",
+        tris.len()
+    );
+    let Some((bvh2, bvh)) = build(&tris, o) else {
+        return;
+    };
+    let bounds = bvh2.bounds();
+    let freq = cells / (bounds.max - bounds.min).max_element();
+    shade(name, &Cutout { bvh, tris, freq }, &bounds, o);
 }
 
 /// `k x k` instances of `mesh` on a grid, each turned about y and scaled by 0.7 to 1.3: one BLAS,
@@ -383,6 +440,7 @@ fn main() {
             render("bunny", &scene::bunny(), &o);
             render("sphereflake", &scene::sphereflake(2, 2), &o);
             render_instances("bunnies", &scene::bunny(), 6, &o);
+            render_cutout("bunny_cutout", &scene::bunny(), 9.0, &o);
         }
     }
 }
