@@ -204,3 +204,108 @@ fn stateful_filters_and_malformed_packs() {
         assert!(back.is_some_and(|h| h.t > 3.5), "{back:?}");
     }
 }
+
+/// The incoherent batches with a filter that reads the ray's index answer as one filtered call
+/// per ray, on BVH4 and BVH8, for every batch length up to 9 and a long one.
+#[test]
+fn filtered_incoherent_batches_equal_single_rays() {
+    use strahl::traverse::BatchHit;
+    let tris = scene::clustered_soup(3000, 5, 2);
+    let rays = mixed_rays(&tris, 600, 21);
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b4 = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    let keep = |ray: usize, h: &Hit| !(ray as u32 + h.prim).is_multiple_of(3);
+    let mut changed = 0;
+    for len in (0..=9).chain([rays.len()]) {
+        let rays = &rays[..len];
+        let (mut h8, mut h4) = (vec![None; len], vec![None; len]);
+        let (mut o8, mut o4) = (vec![false; len], vec![false; len]);
+        b8.intersect_batch_incoherent_filtered::<Watertight>(rays, &mut h8, |h: &BatchHit| keep(h.ray, &h.hit));
+        b4.intersect_batch_incoherent_filtered::<Watertight>(rays, &mut h4, |h: &BatchHit| keep(h.ray, &h.hit));
+        b8.occluded_batch_incoherent_filtered::<Watertight>(rays, &mut o8, |h: &BatchHit| keep(h.ray, &h.hit));
+        b4.occluded_batch_incoherent_filtered::<Watertight>(rays, &mut o4, |h: &BatchHit| keep(h.ray, &h.hit));
+        for (i, r) in rays.iter().enumerate() {
+            let f = |h: &Hit| keep(i, h);
+            let want = intersect_brute_force_filtered::<Watertight, _, _>(&tris[..], r, f);
+            same(h8[i], want, &tris, r, &format!("batch of {len}, BVH8, ray {i}"));
+            same(h4[i], want, &tris, r, &format!("batch of {len}, BVH4, ray {i}"));
+            assert_eq!(
+                h8[i],
+                b8.intersect_filtered::<Watertight>(r, f),
+                "batch of {len}, ray {i}"
+            );
+            assert_eq!(o8[i], want.is_some(), "batch of {len}, BVH8 any hit, ray {i}");
+            assert_eq!(o4[i], want.is_some(), "batch of {len}, BVH4 any hit, ray {i}");
+            changed += usize::from(want != b8.intersect::<Watertight>(r));
+        }
+    }
+    assert!(changed > 50, "the filter changed {changed} answers");
+    // Accepting every hit is the unfiltered batch.
+    let (mut a, mut b) = (vec![None; rays.len()], vec![None; rays.len()]);
+    b8.intersect_batch_incoherent_filtered::<Watertight>(&rays, &mut a, |_: &BatchHit| true);
+    b8.intersect_batch_incoherent::<Watertight>(&rays, &mut b);
+    assert_eq!(a, b);
+}
+
+/// The fallbacks for malformed views (a cycle: the walks give up after as many visits as there
+/// are nodes and scan every pack or primitive) apply the filter too: BVH8 and BVH2 views with a
+/// child pointing back at the root answer as filtered brute force.
+#[test]
+fn filtered_fallbacks_on_malformed_views() {
+    use strahl::layout::{Bvh8Ref, EMPTY_CHILD};
+    use strahl::traverse::{Bvh2Ref, intersect_scalar_filtered, occluded_scalar_filtered};
+    let tris = scene::bunny().to_soup();
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    let rays = mixed_rays(&tris, 150, 17);
+    let even = |h: &Hit| h.prim.is_multiple_of(2);
+    let n = b8.nodes().len();
+    let mut checked = 0;
+    for at in [0, n / 2, n - 1] {
+        let mut nodes = b8.nodes().to_vec();
+        let slot = nodes[at].child.iter().position(|&c| c != EMPTY_CHILD).unwrap_or(0);
+        nodes[at].child[slot] = 0;
+        let view: Bvh8Ref = BvhWideRef {
+            nodes: &nodes,
+            packs: b8.packs(),
+        };
+        for r in &rays {
+            let want = intersect_brute_force_filtered::<Watertight, _, _>(&tris[..], r, even);
+            let got = wide::intersect_filtered::<Watertight, _, 8, _>(view, r, even);
+            same(got, want, &tris, r, &format!("BVH8 cycle at {at}"));
+            assert!(got.is_none_or(|h| even(&h)));
+            assert_eq!(
+                wide::occluded_filtered::<Watertight, _, 8, _>(view, r, even),
+                want.is_some()
+            );
+            checked += 1;
+        }
+    }
+    // A binary interior node whose left child is the root.
+    let k = (1..b2.nodes.len()).find(|&k| !b2.nodes[k].is_leaf()).unwrap();
+    let mut nodes = b2.nodes.clone();
+    nodes[k].index = 0;
+    let view = Bvh2Ref::new(&nodes, &b2.prim_indices);
+    for r in &rays {
+        let want = intersect_brute_force_filtered::<Watertight, _, _>(&tris[..], r, even);
+        let got = intersect_scalar_filtered::<Watertight, _, _>(view, &tris[..], r, even);
+        same(got, want, &tris, r, "BVH2 cycle");
+        assert_eq!(
+            occluded_scalar_filtered::<Watertight, _, _>(view, &tris[..], r, even),
+            want.is_some()
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 4 * rays.len());
+    // Empty scenes: no filter call, no hit, in every tree.
+    let none: Vec<Triangle> = Vec::new();
+    let (e2, _) = Bvh2::build(&none[..], &BuildParams::default()).unwrap();
+    let e4 = Bvh4::from_bvh2(&e2, &none[..]).unwrap();
+    let ray = Ray::new(Vec3::ZERO, Vec3::X);
+    let never = |_: &Hit| panic!("offered a hit in an empty scene");
+    assert!(e2.intersect_filtered::<Watertight, _>(&none[..], &ray, never).is_none());
+    assert!(!e2.occluded_filtered::<Watertight, _>(&none[..], &ray, never));
+    assert!(e4.intersect_filtered::<Watertight>(&ray, never).is_none());
+    assert!(!e4.occluded_filtered::<Watertight>(&ray, never));
+}

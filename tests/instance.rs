@@ -379,12 +379,29 @@ fn bad_instances_are_left_out() {
     assert!(!none.occluded::<Watertight, _, 8>(&b8, &from_left));
     // No instances at all; and tracing with a shorter BLAS slice than the build's skips the
     // instances whose BLAS is missing.
-    assert!(Tlas::build(&[], &b8).unwrap().is_empty());
+    let empty = Tlas::build(&[], &b8).unwrap();
+    assert!(empty.is_empty());
+    let never = |_: &InstanceHit| panic!("a filter offered a hit where there is none");
+    assert_eq!(
+        empty.intersect_filtered::<Watertight, _, 8>(&b8, &from_left, never),
+        None
+    );
+    assert!(!empty.occluded_filtered::<Watertight, _, 8>(&b8, &from_left, never));
+    assert_eq!(
+        none.intersect_filtered::<Watertight, _, 8>(&b8, &from_left, never),
+        None
+    );
     assert_eq!(tlas.intersect::<Watertight, _, 8>(&b8[..1], &from_left), None);
-    // Bad rays.
+    // Bad rays, with and without a filter.
     for r in rays(0, &all, 1.0, 9) {
         assert_eq!(tlas.intersect::<Watertight, _, 8>(&b8, &r), None, "{r:?}");
         assert!(!tlas.occluded::<Moller, _, 8>(&b8, &r), "{r:?}");
+        assert_eq!(
+            tlas.intersect_filtered::<Watertight, _, 8>(&b8, &r, never),
+            None,
+            "{r:?}"
+        );
+        assert!(!tlas.occluded_filtered::<Moller, _, 8>(&b8, &r, never), "{r:?}");
     }
 }
 

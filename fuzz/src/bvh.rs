@@ -338,6 +338,13 @@ pub fn check_bvh(case: &BvhCase) {
                 "{}",
                 what("bvh8 filtered occluded")
             );
+            // `agrees` allows another primitive at a tied `t`: it must pass the filter too.
+            for (tree, got) in [
+                ("bvh2", b2.intersect_filtered::<Watertight, _>(tris, ray, even)),
+                ("bvh8", b8.intersect_filtered::<Watertight>(ray, even)),
+            ] {
+                assert!(got.is_none_or(|h| even(&h)), "{}: a rejected hit {got:?}", what(tree));
+            }
         }
         if params == builders()[0] {
             check_refit(case, &b2, &b8);

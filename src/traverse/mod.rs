@@ -27,8 +27,9 @@
 //! `intersect_scalar::<Watertight, _>(bvh, &tris, &ray)`.
 //!
 //! # Hit filters
-//! Every single-ray traversal has a `*_filtered` form taking a [`HitFilter`] (any closure
-//! `FnMut(&Hit) -> bool`): only the hits it accepts count, as with Embree's intersection filter
+//! The single-ray traversals (BVH2, BVH4, BVH8, brute force, instances, incoherent batches) have a
+//! `*_filtered` form taking a [`HitFilter`] (any closure `FnMut(&Hit) -> bool`): only the hits it
+//! accepts count, as with Embree's intersection filter
 //! functions (alpha tests, masks, skipping the triangle a ray leaves from). The filter is a type
 //! parameter, inlined like the triangle test: `intersect_scalar_filtered::<Watertight, _, _>(bvh,
 //! &tris, &ray, |h: &Hit| h.prim != origin_prim)`.
@@ -70,6 +71,7 @@ pub use brute::{
 };
 pub use bvh2::{intersect_scalar, intersect_scalar_filtered, occluded_scalar, occluded_scalar_filtered};
 pub use node::{Bvh2Ref, Node};
+pub use wide::BatchHit;
 
 use crate::geometry::{Hit, Triangle};
 use crate::intersect::{HitLanes, PreparedPacket, PreparedRay, TriangleLanes, moller, watertight};
@@ -359,8 +361,15 @@ impl<T: TriangleTest, const CONSERVATIVE: bool> TriangleTest for WithBoxes<T, CO
 /// order, and may offer a hit more than once or offer hits beyond the answer, so the filter
 /// should be a function of the hit (its `prim`, `t`, `u`, `v`): then every traversal, width and
 /// the brute-force reference give the same answer. A rejected hit costs a second triangle test
-/// of its pack; an accepted one costs one call. The monomorphised traversals without a filter
-/// ([`AcceptAll`]) are the unfiltered ones, with no call and no test.
+/// of its pack without that lane; an accepted one costs one call (and, for any-hit queries,
+/// the pack's closest-hit test in place of its hit-mask test). The monomorphised traversals
+/// without a filter ([`AcceptAll`]) are the unfiltered ones, with no call and no test.
+///
+/// A closure needs its argument's type written out (`|h: &Hit| ...`, not `|h| ...`): the trait is
+/// implemented for every `FnMut(&H) -> bool`, so the compiler cannot infer `H` from the call. A
+/// filter behind a pointer works too (`&mut dyn FnMut(&Hit) -> bool` is such a closure); a
+/// filter type of your own is passed by value (keep state you need afterwards outside it, as the
+/// counting closure below does).
 ///
 /// ```
 /// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{HitFilter, Watertight}};
@@ -405,7 +414,7 @@ pub trait HitFilter<H = Hit> {
 ///
 /// ```
 /// use strahl::{Hit, traverse::{AcceptAll, HitFilter}};
-/// assert!(AcceptAll::ACCEPTS_ALL && AcceptAll.accept(&Hit::NONE));
+/// assert!(<AcceptAll as HitFilter>::ACCEPTS_ALL && HitFilter::<Hit>::accept(&mut AcceptAll, &Hit::NONE));
 /// ```
 #[derive(Clone, Copy, Debug, Default)]
 pub struct AcceptAll;

@@ -70,8 +70,9 @@ pub fn intersect<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L
 
 /// [`intersect`] counting only the hits `filter` accepts ([`HitFilter`]): the nearest accepted
 /// hit, the same as [`intersect_scalar_filtered`](super::intersect_scalar_filtered) and
-/// [`intersect_brute_force_filtered`](super::intersect_brute_force_filtered) give (`t` always; the
-/// primitive unless tied) for a filter that is a function of the hit.
+/// [`intersect_brute_force_filtered`](super::intersect_brute_force_filtered) give for a filter
+/// that is a function of the hit (as without a filter: the same `t`, and the primitive unless
+/// tied; see [`TriangleTest::CONSERVATIVE_BOXES`] for near-ties).
 ///
 /// ```
 /// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh4, traverse::{Moller, wide}};
@@ -300,21 +301,91 @@ pub fn intersect_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
     rays: &[Ray],
     hits: &mut [Option<Hit>],
 ) {
+    intersect_batch_incoherent_filtered::<T, L, N, _>(bvh, rays, hits, AcceptAll);
+}
+
+/// [`intersect_batch_incoherent`] counting only the hits `filter` accepts ([`HitFilter`] over
+/// [`BatchHit`]s: the hit and the index of its ray in `rays`): `hits[i]` is
+/// [`intersect_filtered`] of `rays[i]` with the filter `|h: &Hit| filter(&BatchHit { ray: i, hit: *h })`.
+///
+/// ```
+/// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{BatchHit, Moller, wide}};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// let rays: Vec<Ray> = (0..4).map(|i| Ray::new(Vec3::new(0.11 * i as f32 + 0.023, 0.047, -3.0), Vec3::Z)).collect();
+/// // Each ray skips one primitive, say the one it was spawned from (here: the front face).
+/// let front: Vec<u32> = rays.iter().map(|r| b8.intersect::<Moller>(r).unwrap().prim).collect();
+/// let mut hits = [None; 4];
+/// wide::intersect_batch_incoherent_filtered::<Moller, _, 8, _>(b8.view(), &rays, &mut hits, |h: &BatchHit| {
+///     h.hit.prim != front[h.ray]
+/// });
+/// for (i, h) in hits.iter().enumerate() {
+///     let own = |x: &Hit| x.prim != front[i];
+///     assert_eq!(*h, wide::intersect_filtered::<Moller, _, 8, _>(b8.view(), &rays[i], own));
+///     assert!(h.unwrap().prim != front[i]); // never the skipped one
+/// }
+/// ```
+pub fn intersect_batch_incoherent_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter<BatchHit>>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    hits: &mut [Option<Hit>],
+    mut filter: F,
+) {
     let start = |i: usize| {
         let r = prepare::<T>(&rays[i]);
         let mut w = ClosestWalk::<STACK>::new(bvh, 0);
         // An empty ray's walk starts done, with no hit (as `intersect`).
         w.done = r.is_empty() || bvh.nodes.is_empty();
-        (r, w)
+        (i, r, w)
     };
     let n = rays.len().min(hits.len());
     interleave2(
         0..n,
         start,
-        |(r, w)| w.step::<T, L, N, _>(bvh, r, &mut AcceptAll),
-        |(_, w)| w.done.then_some(w.best),
+        |(i, r, w)| {
+            let mut f = InBatch {
+                f: &mut filter,
+                ray: *i,
+            };
+            w.step::<T, L, N, _>(bvh, r, &mut f)
+        },
+        |(_, _, w)| w.done.then_some(w.best),
         |i, h| hits[i] = h,
     );
+}
+
+/// A hit of a batch's ray: the hit and the index of its ray in the batch (what the filters of
+/// [`intersect_batch_incoherent_filtered`] and [`occluded_batch_incoherent_filtered`] see).
+///
+/// ```
+/// use strahl::{Hit, traverse::BatchHit};
+/// let h = BatchHit { ray: 3, hit: Hit { t: 1.0, u: 0.25, v: 0.5, prim: 7 } };
+/// assert_eq!((h.ray, h.hit.prim), (3, 7));
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BatchHit {
+    /// Index of the ray in the batch.
+    pub ray: usize,
+    /// The hit.
+    pub hit: Hit,
+}
+
+/// A filter over [`BatchHit`]s seen as one over the [`Hit`]s of ray `ray`.
+struct InBatch<'a, F> {
+    f: &'a mut F,
+    ray: usize,
+}
+
+impl<F: HitFilter<BatchHit>> HitFilter for InBatch<'_, F> {
+    const ACCEPTS_ALL: bool = F::ACCEPTS_ALL;
+    #[inline(always)]
+    fn accept(&mut self, hit: &Hit) -> bool {
+        self.f.accept(&BatchHit {
+            ray: self.ray,
+            hit: *hit,
+        })
+    }
 }
 
 /// [`intersect_batch_incoherent`] in the order `order`: for each entry `i` of `order`, `hits[i]`
@@ -531,17 +602,47 @@ pub fn occluded_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
     rays: &[Ray],
     out: &mut [bool],
 ) {
+    occluded_batch_incoherent_filtered::<T, L, N, _>(bvh, rays, out, AcceptAll);
+}
+
+/// [`occluded_batch_incoherent`] counting only the hits `filter` accepts ([`HitFilter`] over
+/// [`BatchHit`]s): `out[i]` is [`occluded_filtered`] of `rays[i]` with the filter
+/// `|h: &Hit| filter(&BatchHit { ray: i, hit: *h })`.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{BatchHit, Moller, wide}};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// let rays = [Ray::new(Vec3::ZERO, Vec3::X); 4]; // from inside the sphere
+/// let mut out = [false; 4];
+/// // Odd rays see every triangle, even rays none (say, a light-linking mask per ray).
+/// wide::occluded_batch_incoherent_filtered::<Moller, _, 8, _>(b8.view(), &rays, &mut out, |h: &BatchHit| h.ray % 2 == 1);
+/// assert_eq!(out, [false, true, false, true]);
+/// ```
+pub fn occluded_batch_incoherent_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter<BatchHit>>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    out: &mut [bool],
+    mut filter: F,
+) {
     let start = |i: usize| {
         let r = prepare::<T>(&rays[i]);
         let w = AnyHitWalk::<STACK>::new(bvh, &r);
-        (r, w)
+        (i, r, w)
     };
     let n = rays.len().min(out.len());
     interleave2(
         0..n,
         start,
-        |(r, w)| w.step::<T, L, N, _>(bvh, r, &mut AcceptAll),
-        |(_, w)| w.done,
+        |(i, r, w)| {
+            let mut f = InBatch {
+                f: &mut filter,
+                ray: *i,
+            };
+            w.step::<T, L, N, _>(bvh, r, &mut f)
+        },
+        |(_, _, w)| w.done,
         |i, o| out[i] = o,
     );
 }
@@ -594,11 +695,11 @@ pub fn occluded_batch_ordered<T: TriangleTest, L: Lane, const N: usize>(
 fn interleave2<S, O>(
     mut items: impl Iterator<Item = usize>,
     start: impl Fn(usize) -> S,
-    step: impl Fn(&mut S),
+    mut step: impl FnMut(&mut S),
     answer: impl Fn(&S) -> Option<O>,
     mut put: impl FnMut(usize, O),
 ) {
-    let finish = |w: &mut S| loop {
+    let finish = |w: &mut S, step: &mut dyn FnMut(&mut S)| loop {
         match answer(w) {
             Some(x) => return x,
             None => step(w),
@@ -606,7 +707,7 @@ fn interleave2<S, O>(
     };
     let Some(mut ia) = items.next() else { return };
     let Some(mut ib) = items.next() else {
-        put(ia, finish(&mut start(ia)));
+        put(ia, finish(&mut start(ia), &mut step));
         return;
     };
     let (mut a, mut b) = (start(ia), start(ib));
@@ -620,7 +721,7 @@ fn interleave2<S, O>(
         if let Some(x) = answer(&a) {
             put(ia, x);
             let Some(next) = items.next() else {
-                put(ib, finish(&mut b));
+                put(ib, finish(&mut b, &mut step));
                 return;
             };
             ia = next;
@@ -629,7 +730,7 @@ fn interleave2<S, O>(
         if let Some(x) = answer(&b) {
             put(ib, x);
             let Some(next) = items.next() else {
-                put(ia, finish(&mut a));
+                put(ia, finish(&mut a, &mut step));
                 return;
             };
             ib = next;
@@ -673,7 +774,12 @@ fn any_in_pack<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
     pack: &TriangleLanes<L, N>,
     f: &mut F,
 ) -> bool {
-    T::hit_mask_lanes(r, pack) != 0 && (F::ACCEPTS_ALL || closest_in_pack::<T, L, N, F>(r, pack, f).is_some())
+    if F::ACCEPTS_ALL {
+        T::hit_mask_lanes(r, pack) != 0
+    } else {
+        // The closest-hit test at once (not the mask first): a pack with a hit is tested once.
+        closest_in_pack::<T, L, N, F>(r, pack, f).is_some()
+    }
 }
 
 /// The closest hit over every pack: the exact answer for any tree, used only when a malformed or
@@ -803,6 +909,28 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
         intersect_batch_incoherent::<T, L, N>(self.view(), rays, hits);
     }
 
+    /// [`intersect_batch_incoherent`](Self::intersect_batch_incoherent) counting only the hits
+    /// `filter` accepts ([`intersect_batch_incoherent_filtered`], [`BatchHit`]).
+    ///
+    /// ```
+    /// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{BatchHit, Watertight}};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let rays: Vec<Ray> = (0..6).map(|i| Ray::new(Vec3::new(0.1 * i as f32, 0.0, -3.0), Vec3::Z)).collect();
+    /// let mut hits = [None; 6];
+    /// b8.intersect_batch_incoherent_filtered::<Watertight>(&rays, &mut hits, |h: &BatchHit| h.hit.t > 2.5);
+    /// assert!(hits.iter().all(|h| h.is_some_and(|h| h.t > 3.5))); // through the front, onto the back
+    /// ```
+    pub fn intersect_batch_incoherent_filtered<T: TriangleTest>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        filter: impl HitFilter<BatchHit>,
+    ) {
+        intersect_batch_incoherent_filtered::<T, L, N, _>(self.view(), rays, hits, filter);
+    }
+
     /// Any-hit answers of a batch: `occluded[i]` for `rays[i]`.
     ///
     /// ```
@@ -843,6 +971,31 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     /// ```
     pub fn occluded_batch_incoherent<T: TriangleTest>(&self, rays: &[Ray], occluded: &mut [bool]) {
         occluded_batch_incoherent::<T, L, N>(self.view(), rays, occluded);
+    }
+
+    /// [`occluded_batch_incoherent`](Self::occluded_batch_incoherent) counting only the hits
+    /// `filter` accepts ([`occluded_batch_incoherent_filtered`], [`BatchHit`]).
+    ///
+    /// ```
+    /// use strahl::{Hit, Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{BatchHit, Watertight}};
+    /// # let tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let rays: Vec<Ray> = (0..6).map(|i| Ray::new(Vec3::ZERO, Vec3::new(1.0, 0.3 * i as f32, 0.2))).collect();
+    /// let alpha = |h: &Hit| h.u < 0.4;
+    /// let mut out = [false; 6];
+    /// b8.occluded_batch_incoherent_filtered::<Watertight>(&rays, &mut out, |h: &BatchHit| alpha(&h.hit));
+    /// for (r, o) in rays.iter().zip(out) {
+    ///     assert_eq!(o, b8.occluded_filtered::<Watertight>(r, alpha));
+    /// }
+    /// ```
+    pub fn occluded_batch_incoherent_filtered<T: TriangleTest>(
+        &self,
+        rays: &[Ray],
+        occluded: &mut [bool],
+        filter: impl HitFilter<BatchHit>,
+    ) {
+        occluded_batch_incoherent_filtered::<T, L, N, _>(self.view(), rays, occluded, filter);
     }
 
     /// Closest hits of a batch of incoherent rays, traced in the Morton order of their origins
