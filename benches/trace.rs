@@ -139,6 +139,15 @@ fn run_bvh8_filter_all(c: &Contenders, rays: &[Ray]) -> usize {
         .count()
 }
 
+/// BVH8 with an alpha-test stand-in that rejects the hits of odd primitives (a real rejection
+/// rate: about half the candidates are tested again or passed through).
+fn run_bvh8_filter_odd(c: &Contenders, rays: &[Ray]) -> usize {
+    let even = |h: &Hit| h.prim.is_multiple_of(2);
+    rays.iter()
+        .filter(|r| c.bvh8.intersect_filtered::<Moller>(r, even).is_some())
+        .count()
+}
+
 fn run_bvh_crate(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter()
         .filter(|r| {
@@ -235,6 +244,13 @@ fn run_bvh8_occluded_filter_all(c: &Contenders, rays: &[Ray]) -> usize {
         .count()
 }
 
+fn run_bvh8_occluded_filter_odd(c: &Contenders, rays: &[Ray]) -> usize {
+    let even = |h: &Hit| h.prim.is_multiple_of(2);
+    rays.iter()
+        .filter(|r| c.bvh8.occluded_filtered::<Moller>(r, even))
+        .count()
+}
+
 fn run_bvh8_incoherent(c: &Contenders, rays: &[Ray]) -> usize {
     let mut hits = vec![None; rays.len()];
     c.bvh8.intersect_batch_incoherent::<Moller>(rays, &mut hits);
@@ -321,6 +337,16 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
     let embree_robust = peers::embree::Scene::with_flags(&device, &c.tris, peers::embree::Quality::Medium, true);
     // The same scene with a hit filter that keeps every hit (`bvh8_filter_all`'s, through Embree's
     // filter callbacks).
+    // And one that rejects odd primitives (`bvh8_filter_odd`'s filter): its answers are checked
+    // against strahl's, which also checks the callback's reading of Embree's hit.
+    #[cfg(feature = "embree")]
+    let embree_odd = peers::embree::Scene::with_filter(
+        &device,
+        &c.tris,
+        peers::embree::Quality::Medium,
+        false,
+        Some(peers::embree::keep_even_prims),
+    );
     #[cfg(feature = "embree")]
     let embree_filter = peers::embree::Scene::with_filter(
         &device,
@@ -338,6 +364,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh8", run_bvh8_occluded),
                 ("bvh8_fast", run_bvh8_occluded_fast),
                 ("bvh8_filter_all", run_bvh8_occluded_filter_all),
+                ("bvh8_filter_odd", run_bvh8_occluded_filter_odd),
                 ("bvh8_incoherent", run_bvh8_occluded_incoherent),
                 ("bvh8_reordered", run_bvh8_occluded_reordered),
                 ("packet8_bvh8", run_packet8_occluded),
@@ -351,6 +378,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh8", run_bvh8),
                 ("bvh8_fast", run_bvh8_fast),
                 ("bvh8_filter_all", run_bvh8_filter_all),
+                ("bvh8_filter_odd", run_bvh8_filter_odd),
                 ("bvh8_incoherent", run_bvh8_incoherent),
                 ("bvh8_reordered", run_bvh8_reordered),
                 ("packet8_bvh8", run_packet8),
@@ -361,8 +389,23 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
         };
         // The same answers before timing: strahl's trees exactly, peers to within 0.1%.
         let reference = members[0].1(&c, rays);
+        // The rejecting filter's answers: the scalar BVH2 reference with the same filter.
+        let even = |h: &Hit| h.prim.is_multiple_of(2);
+        let filtered_reference = if *any_hit {
+            rays.iter()
+                .filter(|r| c.bvh2.occluded_filtered::<Moller, _>(&c.tris[..], r, even))
+                .count()
+        } else {
+            rays.iter()
+                .filter(|r| c.bvh2.intersect_filtered::<Moller, _>(&c.tris[..], r, even).is_some())
+                .count()
+        };
         for (m, f) in &members[1..] {
             let got = f(&c, rays);
+            if m.contains("filter_odd") {
+                assert_eq!(got, filtered_reference, "{name}/{kind}: {m}");
+                continue;
+            }
             // The fast slab test may miss hits on boxes a ray grazes: within 0.1% like the peers.
             let ours = ((m.starts_with("bvh") && !m.contains("crate")) || m.contains("8_bvh8")) && !m.contains("fast");
             let tol = if ours { 0 } else { rays.len() / 1000 + 1 };
@@ -408,6 +451,22 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 got.abs_diff(reference) <= rays.len() / 1000 + 1,
                 "{name}/{kind}: filtered embree hits {got}, bvh2 {reference}"
             );
+            let eo = &embree_odd;
+            let (got, want) = if *any_hit {
+                (
+                    rays.iter().filter(|r| eo.occluded1(r)).count(),
+                    run_bvh8_occluded_filter_odd(&c, rays),
+                )
+            } else {
+                (
+                    rays.iter().filter(|r| eo.intersect1(r).is_some()).count(),
+                    run_bvh8_filter_odd(&c, rays),
+                )
+            };
+            assert!(
+                got.abs_diff(want) <= rays.len() / 1000 + 1,
+                "{name}/{kind}: embree with odd primitives rejected hits {got}, bvh8 {want}"
+            );
             let er = &embree_robust;
             let got = if *any_hit {
                 rays.iter().filter(|r| er.occluded1(r)).count()
@@ -444,6 +503,9 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 g.bench_function("embree_filter_all_rtcOccluded1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| ef.occluded1(r)).count())
                 });
+                g.bench_function("embree_filter_odd_rtcOccluded1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| eo.occluded1(r)).count())
+                });
                 g.bench_function("embree_robust_rtcOccluded1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| er.occluded1(r)).count())
                 });
@@ -456,6 +518,9 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 });
                 g.bench_function("embree_filter_all_rtcIntersect1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| ef.intersect1(r).is_some()).count())
+                });
+                g.bench_function("embree_filter_odd_rtcIntersect1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| eo.intersect1(r).is_some()).count())
                 });
                 g.bench_function("embree_robust_rtcIntersect1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| er.intersect1(r).is_some()).count())

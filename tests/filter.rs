@@ -309,3 +309,100 @@ fn filtered_fallbacks_on_malformed_views() {
     assert!(e4.intersect_filtered::<Watertight>(&ray, never).is_none());
     assert!(!e4.occluded_filtered::<Watertight>(&ray, never));
 }
+
+/// A triangle test of its own (Möller-Trumbore's kernels) that keeps `TriangleTest`'s default
+/// `closest_accepted_lanes` (the pack tested again without each rejected lane).
+struct OwnTest;
+
+impl TriangleTest for OwnTest {
+    const NAME: &'static str = "own";
+    const WATERTIGHT: bool = false;
+    fn intersect(ray: &strahl::intersect::PreparedRay, tri: &Triangle, prim: u32) -> Option<Hit> {
+        Moller::intersect(ray, tri, prim)
+    }
+    fn intersect_lanes<L: strahl::math::Lane, const N: usize>(
+        ray: &strahl::intersect::PreparedRay,
+        tris: &strahl::intersect::TriangleLanes<L, N>,
+    ) -> Option<Hit> {
+        Moller::intersect_lanes(ray, tris)
+    }
+    fn hit_mask_lanes<L: strahl::math::Lane, const N: usize>(
+        ray: &strahl::intersect::PreparedRay,
+        tris: &strahl::intersect::TriangleLanes<L, N>,
+    ) -> u32 {
+        Moller::hit_mask_lanes(ray, tris)
+    }
+    fn intersect_packet<L: strahl::math::Lane, const N: usize>(
+        rays: &mut strahl::intersect::PreparedPacket<L, N>,
+        tri: &Triangle,
+        prim: u32,
+        hits: &mut strahl::intersect::HitLanes<L, N>,
+    ) -> u32 {
+        Moller::intersect_packet(rays, tri, prim, hits)
+    }
+}
+
+/// The default leaf test of a filter (the pack tested again) and Möller-Trumbore's own (the lanes
+/// computed once) offer the same hits in the same order and answer the same, in packs and
+/// through whole trees.
+#[test]
+fn default_and_compute_once_leaf_tests_agree() {
+    use strahl::intersect::{PreparedRay, TriangleX8};
+    let mut rng = Rng::new(31);
+    // Stacks of triangles along z, some tied, some shared primitives (a malformed pack).
+    for round in 0..300 {
+        let n = 1 + round % 8;
+        let tris: Vec<Triangle> = (0..n)
+            .map(|_| {
+                let z = (rng.u64() % 4) as f32 + 1.0;
+                [
+                    Vec3::new(-1.0, -1.0, z),
+                    Vec3::new(1.0, -1.0, z),
+                    Vec3::new(0.0, 1.0, z),
+                ]
+            })
+            .collect();
+        let prims: Vec<u32> = (0..n as u32).map(|i| if round % 5 == 0 { i / 2 } else { i }).collect();
+        let pack = TriangleX8::pack(&tris, &prims);
+        let ray = PreparedRay::new(&Ray::new(Vec3::new(0.1, -0.2, 0.0), Vec3::Z));
+        let reject = rng.u64() as u32;
+        let run = |own: bool| {
+            let mut offered = Vec::new();
+            let f = |h: &Hit| {
+                offered.push((h.prim, h.t.to_bits()));
+                reject >> (h.prim % 32) & 1 == 0
+            };
+            let got = if own {
+                OwnTest::closest_accepted_lanes(&ray, &pack, f)
+            } else {
+                Moller::closest_accepted_lanes(&ray, &pack, f)
+            };
+            (got, offered)
+        };
+        let (a, b) = (run(true), run(false));
+        if round % 5 == 0 {
+            // Repeated primitives: the default may drop another lane of the same primitive, so
+            // only the answer's validity is compared.
+            assert!(a.0.is_none_or(|h| reject >> (h.prim % 32) & 1 == 0), "round {round}");
+        } else {
+            assert_eq!(a, b, "round {round}");
+        }
+    }
+    // Through trees.
+    let tris = random_soup(1500, 8);
+    let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    for (i, r) in mixed_rays(&tris, 300, 3).iter().enumerate() {
+        let f = |h: &Hit| (h.u * 5.0).fract() < 0.6;
+        assert_eq!(
+            b8.intersect_filtered::<OwnTest>(r, f),
+            b8.intersect_filtered::<Moller>(r, f),
+            "ray {i}"
+        );
+        assert_eq!(
+            b8.occluded_filtered::<OwnTest>(r, f),
+            b8.occluded_filtered::<Moller>(r, f),
+            "ray {i}"
+        );
+    }
+}

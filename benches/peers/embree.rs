@@ -185,6 +185,26 @@ pub unsafe extern "C" fn keep_finite_t(args: *const RTCFilterFunctionNArguments)
     }
 }
 
+/// The alpha-test stand-in of the trace bench: rejects the hits of odd primitives (read from
+/// the hit's `primID`), as strahl's `|h: &Hit| h.prim % 2 == 0` does.
+///
+/// # Safety
+/// Called by Embree only, with its arguments for `N` rays.
+pub unsafe extern "C" fn keep_even_prims(args: *const RTCFilterFunctionNArguments) {
+    // SAFETY: Embree passes valid arguments: `valid` and the SoA hit of `n` lanes, `primID` at
+    // 32-bit offset `5 n` (Ng xyz, u, v, then primID).
+    unsafe {
+        let a = &*args;
+        let n = a.n as usize;
+        for i in 0..n {
+            let prim = (*a.hit.add(5 * n + i)).to_bits();
+            if *a.valid.add(i) != 0 && prim % 2 == 1 {
+                *a.valid.add(i) = 0;
+            }
+        }
+    }
+}
+
 #[link(name = "embree3")]
 unsafe extern "C" {
     fn rtcSetGeometryIntersectFilterFunction(geometry: RTCGeometry, filter: Option<RTCFilterFunctionN>);

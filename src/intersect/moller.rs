@@ -141,6 +141,18 @@ pub fn hit_mask<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes
     lanes_one_ray(ray, &tris.v).0 & tris.valid
 }
 
+/// [`intersect_lanes`] counting only the hits `accept` takes: the closest accepted hit, the lanes
+/// computed once (the hit filters' leaf test).
+#[inline(always)]
+pub(crate) fn closest_accepted<L: Lane, const N: usize>(
+    ray: &PreparedRay,
+    tris: &TriangleLanes<L, N>,
+    accept: impl FnMut(&Hit) -> bool,
+) -> Option<Hit> {
+    let (m, t, u, v) = lanes_one_ray(ray, &tris.v);
+    super::soa::closest_accepted(m & tris.valid, t, u, v, &tris.prim, accept)
+}
+
 /// Closest hit of one ray among `N` SoA triangles (ties: lowest lane).
 ///
 /// ```

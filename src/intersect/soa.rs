@@ -172,6 +172,39 @@ impl<L: Lane, const N: usize> HitLanes<L, N> {
     }
 }
 
+/// The closest hit among the lanes in `mask` that `accept` takes (the hit filters' leaf test):
+/// the lanes in [`closest_lane`]'s order, each offered until one is taken.
+#[inline(always)]
+pub(crate) fn closest_accepted<L: Lane>(
+    mut mask: u32,
+    t: L,
+    u: L,
+    v: L,
+    prim: &[u32],
+    mut accept: impl FnMut(&Hit) -> bool,
+) -> Option<Hit> {
+    // The same selection as `closest_lane` (the least `t`, ties to the lowest lane); a rejected
+    // lane is dropped and the next one selected from the same lanes, computed once.
+    loop {
+        if mask == 0 {
+            return None;
+        }
+        let tm = L::from_bitmask(mask).select(t, L::splat(f32::INFINITY));
+        let best = tm.min_lane();
+        let lane = (tm.eq(L::splat(best)).bitmask() & mask).trailing_zeros() as usize;
+        let h = Hit {
+            t: t.lane(lane),
+            u: u.lane(lane),
+            v: v.lane(lane),
+            prim: prim[lane],
+        };
+        if accept(&h) {
+            return Some(h);
+        }
+        mask &= !(1 << lane);
+    }
+}
+
 /// The closest hit among the lanes in `mask`; ties go to the lowest lane (as a scalar loop over the
 /// lanes with a strict `<` would).
 #[inline(always)]

@@ -190,6 +190,37 @@ pub trait TriangleTest {
     /// assert_eq!(Moller::hit_mask_lanes(&ray, &leaf), 0b101);
     /// ```
     fn hit_mask_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> u32;
+    /// The closest hit among `N` SoA triangles that `accept` takes (ties: lowest lane), for the
+    /// hit filters ([`HitFilter`]): the hits offered nearest first, each once. The default tests
+    /// the pack again without each rejected lane ([`intersect_lanes`](Self::intersect_lanes)
+    /// at most `N` times); [`Moller`] and [`Watertight`] compute the lanes once and offer them in
+    /// turn (the same hits, in the same order).
+    ///
+    /// ```
+    /// use strahl::{Hit, Ray, Vec3, intersect::{PreparedRay, TriangleX8}, traverse::{Moller, TriangleTest}};
+    /// let tri = |z: f32| [Vec3::new(-1.0, -1.0, z), Vec3::new(1.0, -1.0, z), Vec3::new(0.0, 1.0, z)];
+    /// let leaf = TriangleX8::pack(&[tri(3.0), tri(2.0), tri(4.0)], &[7, 8, 9]);
+    /// let ray = PreparedRay::new(&Ray::new(Vec3::ZERO, Vec3::Z));
+    /// let mut offered = Vec::new();
+    /// let hit = Moller::closest_accepted_lanes(&ray, &leaf, |h: &Hit| {
+    ///     offered.push(h.prim);
+    ///     h.prim != 8
+    /// });
+    /// assert_eq!(hit.map(|h| (h.t, h.prim)), Some((3.0, 7)));
+    /// assert_eq!(offered, [8, 7]); // nearest first
+    /// ```
+    #[inline(always)]
+    fn closest_accepted_lanes<L: Lane, const N: usize>(
+        ray: &PreparedRay,
+        tris: &TriangleLanes<L, N>,
+        mut accept: impl FnMut(&Hit) -> bool,
+    ) -> Option<Hit> {
+        let h = Self::intersect_lanes(ray, tris)?;
+        if accept(&h) {
+            return Some(h);
+        }
+        retest_without::<Self, L, N>(ray, tris, h, &mut accept)
+    }
     /// `N` rays against one triangle: lanes hit closer than their `tmax` get `hits` and `tmax`
     /// updated; returns the mask of lanes hit (for packet traversal).
     ///
@@ -328,6 +359,14 @@ impl<T: TriangleTest, const CONSERVATIVE: bool> TriangleTest for WithBoxes<T, CO
         T::hit_mask_lanes(ray, tris)
     }
     #[inline(always)]
+    fn closest_accepted_lanes<L: Lane, const N: usize>(
+        ray: &PreparedRay,
+        tris: &TriangleLanes<L, N>,
+        accept: impl FnMut(&Hit) -> bool,
+    ) -> Option<Hit> {
+        T::closest_accepted_lanes(ray, tris, accept)
+    }
+    #[inline(always)]
     fn intersect_packet<L: Lane, const N: usize>(
         rays: &mut PreparedPacket<L, N>,
         tri: &Triangle,
@@ -360,10 +399,11 @@ impl<T: TriangleTest, const CONSERVATIVE: bool> TriangleTest for WithBoxes<T, CO
 /// an any-hit query reports whether some hit is accepted. The traversals offer hits in no fixed
 /// order, and may offer a hit more than once or offer hits beyond the answer, so the filter
 /// should be a function of the hit (its `prim`, `t`, `u`, `v`): then every traversal, width and
-/// the brute-force reference give the same answer. A rejected hit costs a second triangle test
-/// of its pack without that lane; an accepted one costs one call (and, for any-hit queries,
-/// the pack's closest-hit test in place of its hit-mask test). The monomorphised traversals
-/// without a filter ([`AcceptAll`]) are the unfiltered ones, with no call and no test.
+/// the brute-force reference give the same answer. A leaf pack's lanes are tested once and its
+/// hits offered nearest first ([`TriangleTest::closest_accepted_lanes`]): a rejected hit costs the
+/// selection of the next one, an accepted one a call (and, for any-hit queries, the pack's
+/// closest-hit test in place of its hit-mask test). The monomorphised traversals without a
+/// filter ([`AcceptAll`]) are the unfiltered ones, with no call and no test.
 ///
 /// A closure needs its argument's type written out (`|h: &Hit| ...`, not `|h| ...`): the trait is
 /// implemented for every `FnMut(&H) -> bool`, so the compiler cannot infer `H` from the call. A
@@ -441,22 +481,22 @@ pub(crate) fn closest_in_pack<T: TriangleTest, L: Lane, const N: usize, F: HitFi
     pack: &TriangleLanes<L, N>,
     f: &mut F,
 ) -> Option<Hit> {
-    let h = T::intersect_lanes(r, pack)?;
-    if F::ACCEPTS_ALL || f.accept(&h) {
-        return Some(h);
+    if F::ACCEPTS_ALL {
+        T::intersect_lanes(r, pack)
+    } else {
+        T::closest_accepted_lanes(r, pack, |h: &Hit| f.accept(h))
     }
-    next_accepted::<T, L, N, F>(r, pack, h, f)
 }
 
-/// [`closest_in_pack`] after `rejected`: the pack tested again without the lane that gave it,
-/// until a hit is accepted or none is left (at most `N` tests).
+/// [`TriangleTest::closest_accepted_lanes`]'s default after `rejected`: the pack tested again
+/// without the lane that gave it, until a hit is accepted or none is left (at most `N` tests).
 #[cold]
 #[inline(never)]
-fn next_accepted<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+fn retest_without<T: TriangleTest + ?Sized, L: Lane, const N: usize>(
     r: &PreparedRay,
     pack: &TriangleLanes<L, N>,
     rejected: Hit,
-    f: &mut F,
+    accept: &mut impl FnMut(&Hit) -> bool,
 ) -> Option<Hit> {
     let mut rest = *pack;
     let mut h = rejected;
@@ -466,7 +506,7 @@ fn next_accepted<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
         let lane = (0..N.min(32)).find(|&i| rest.valid >> i & 1 == 1 && rest.prim[i] == h.prim)?;
         rest.valid &= !(1 << lane);
         h = T::intersect_lanes(r, &rest)?;
-        if f.accept(&h) {
+        if accept(&h) {
             return Some(h);
         }
     }
@@ -528,6 +568,14 @@ impl TriangleTest for Moller {
         moller::hit_mask(ray, tris)
     }
     #[inline(always)]
+    fn closest_accepted_lanes<L: Lane, const N: usize>(
+        ray: &PreparedRay,
+        tris: &TriangleLanes<L, N>,
+        accept: impl FnMut(&Hit) -> bool,
+    ) -> Option<Hit> {
+        moller::closest_accepted(ray, tris, accept)
+    }
+    #[inline(always)]
     fn intersect_packet<L: Lane, const N: usize>(
         rays: &mut PreparedPacket<L, N>,
         tri: &Triangle,
@@ -561,6 +609,14 @@ impl TriangleTest for Watertight {
     #[inline(always)]
     fn hit_mask_lanes<L: Lane, const N: usize>(ray: &PreparedRay, tris: &TriangleLanes<L, N>) -> u32 {
         watertight::hit_mask(ray, tris)
+    }
+    #[inline(always)]
+    fn closest_accepted_lanes<L: Lane, const N: usize>(
+        ray: &PreparedRay,
+        tris: &TriangleLanes<L, N>,
+        accept: impl FnMut(&Hit) -> bool,
+    ) -> Option<Hit> {
+        watertight::closest_accepted(ray, tris, accept)
     }
     #[inline(always)]
     fn intersect_packet<L: Lane, const N: usize>(
