@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{mixed_rays, same};
+use common::{mixed_rays, random_soup, same};
 use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::{Hit, Triangle};
 use strahl::layout::{Bvh4, Bvh8, BvhWideRef};
@@ -77,20 +77,6 @@ fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) ->
         }
     }
     filtered_out
-}
-
-fn random_soup(n: usize, seed: u64) -> Vec<Triangle> {
-    let mut rng = Rng::new(seed);
-    (0..n)
-        .map(|_| {
-            let c = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 10.0;
-            [
-                c + rng.unit_vector() * 0.3,
-                c + rng.unit_vector() * 0.3,
-                c + rng.unit_vector() * 0.3,
-            ]
-        })
-        .collect()
 }
 
 #[test]

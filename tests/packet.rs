@@ -6,14 +6,14 @@
 
 mod common;
 
-use common::{bounds, mixed_rays, same};
+use common::{bounds, mixed_rays, random_soup, same};
 use proptest::prelude::*;
 use std::sync::OnceLock;
 use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::{Hit, Triangle};
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::math::{Lane, f32x4, f32x8};
-use strahl::scene::{self, Rng};
+use strahl::scene;
 use strahl::traverse::packet::{self, TileShape, f32x16};
 use strahl::traverse::{Moller, TriangleTest, Watertight, intersect_scalar, occluded_scalar, wide};
 use strahl::{Ray, Vec3};
@@ -154,20 +154,6 @@ fn check_scene<T: TriangleTest>(name: &str, s: &Scene, n_mixed: usize, w: u32, h
     for shape in [TileShape::X4_4, TileShape::X8_2] {
         check_k::<T, f32x16, 16>(s, &camera_rays(&s.tris, shape, w, h), &format!("{name} {shape:?}"));
     }
-}
-
-fn random_soup(n: usize, seed: u64) -> Vec<Triangle> {
-    let mut rng = Rng::new(seed);
-    (0..n)
-        .map(|_| {
-            let c = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 10.0;
-            [
-                c + rng.unit_vector() * 0.3,
-                c + rng.unit_vector() * 0.3,
-                c + rng.unit_vector() * 0.3,
-            ]
-        })
-        .collect()
 }
 
 #[test]

@@ -158,3 +158,19 @@ pub fn cube_and_far_outlier(seed: u64) -> Vec<Triangle> {
     tris.push([far, far + Vec3::X, far + Vec3::Y]);
     tris
 }
+
+/// `n` random triangles in a 10-unit cube: centres uniform, vertices within 0.3 of the centre in
+/// random directions (from `Rng::new(seed)`).
+pub fn random_soup(n: usize, seed: u64) -> Vec<Triangle> {
+    let mut rng = Rng::new(seed);
+    (0..n)
+        .map(|_| {
+            let c = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 10.0;
+            [
+                c + rng.unit_vector() * 0.3,
+                c + rng.unit_vector() * 0.3,
+                c + rng.unit_vector() * 0.3,
+            ]
+        })
+        .collect()
+}
