@@ -23,7 +23,7 @@ mod common;
 #[path = "peers/mod.rs"]
 mod peers;
 
-use common::{BvhCrateTri, bounds, diffuse_rays, primary_rays, surface_points};
+use common::{BvhCrateTri, bounds, diffuse_rays, primary_rays, shadow_rays};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -32,12 +32,12 @@ use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::{Hit, Triangle};
 use strahl::intersect::{PreparedRay, moller};
 use strahl::layout::{Bvh4, Bvh8};
-use strahl::scene::{self, Rng};
+use strahl::scene;
 #[cfg(feature = "embree")]
 use strahl::traverse::order::RayOrder;
 use strahl::traverse::packet::TileShape;
 use strahl::traverse::{Fast, Moller};
-use strahl::{Aabb, Ray, Vec3};
+use strahl::{Ray, Vec3};
 
 struct Contenders {
     tris: Vec<Triangle>,
@@ -99,19 +99,6 @@ fn build(tris: Vec<Triangle>) -> Contenders {
         peer_bvh_shapes,
         obvhs,
     }
-}
-
-fn shadow_rays(tris: &[Triangle], b: &Aabb, n: usize, scale: f32) -> Vec<Ray> {
-    let mut rng = Rng::new(6);
-    surface_points(tris, n, &mut rng)
-        .into_iter()
-        .map(|(p, nrm)| {
-            let o = p + nrm * scale * 1e-5;
-            let target = b.min + (b.max - b.min) * Vec3::new(rng.f32(), rng.f32(), rng.f32());
-            let d = target - o;
-            Ray::with_range(o, d, 0.0, 1.0)
-        })
-        .collect()
 }
 
 // ---- the contenders' loops: each returns a checksum (hit count) so nothing is optimised away ----

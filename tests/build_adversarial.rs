@@ -31,8 +31,8 @@ use std::fmt::Display;
 use std::sync::mpsc;
 use std::time::Duration;
 use strahl::build::{
-    BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Primitives, Refine, ReinsertParams, Strategy,
-    TreeletParams, ValidateError,
+    BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Primitives, Refine, ReinsertParams, SpatialSplits,
+    Strategy, TreeletParams, ValidateError,
 };
 use strahl::geometry::{Hit, Triangle};
 use strahl::layout::{Bvh4, Bvh8};
@@ -532,6 +532,85 @@ fn every_params_on_adversarial_scenes() {
                 p.max_depth
             );
             assert!(v.max_leaf_size <= p.max_leaf_size, "{what}: leaf {}", v.max_leaf_size);
+            check_trees(&tris, &bvh, &rays, &truth, 2, &what);
+        }
+    }
+}
+
+/// Spatial splits ([`Bvh2::build_spatial`]) on every small adversarial scene, the large ones at
+/// 3,000 triangles and a deep geometric series, with the default knobs, aggressive ones (no
+/// overlap threshold, 16 references per triangle, 4 bins, every node searched, leaves of 1) and
+/// the depth bound 34: valid by `validate_split`, within the depth, leaf and reference bounds,
+/// the plain build's primitive and invalid counts, and brute force's closest hits through the
+/// tree and its collapses.
+#[test]
+fn spatial_splits_on_adversarial_scenes() {
+    let aggressive = SpatialSplits {
+        alpha: 0.0,
+        max_references: 16.0,
+        bins: 4,
+        min_node_size: 2,
+    };
+    let knobs = [
+        ("default", BuildParams::default(), SpatialSplits::default()),
+        (
+            "aggressive",
+            BuildParams {
+                min_leaf_size: 1,
+                max_leaf_size: 1,
+                ..BuildParams::default()
+            },
+            aggressive,
+        ),
+        (
+            "depth34",
+            BuildParams {
+                max_depth: 34,
+                min_leaf_size: 1,
+                max_leaf_size: 2,
+                ..BuildParams::quality()
+            },
+            SpatialSplits {
+                bins: 64,
+                max_references: 4.0,
+                ..aggressive
+            },
+        ),
+    ];
+    let mut scenes = small_scenes();
+    scenes.extend(large_scenes_of(3000));
+    scenes.push(("geometric-deep", geometric(2000, 200)));
+    for (sname, tris) in scenes {
+        let rays = rays_for(&tris, 120, 3);
+        let truth = brute_force(&tris, &rays);
+        let (_, plain) = ok(Bvh2::build(&tris[..], &BuildParams::default()), sname, "plain build");
+        for (kname, p, sp) in &knobs {
+            let what = format!("{sname}/spatial {kname}");
+            let (bvh, stats) = ok(Bvh2::build_spatial(&tris[..], p, sp), &what, "build");
+            let v = ok(bvh.validate_split(&tris[..]), &what, "validate_split");
+            assert_eq!(
+                (v.primitives, stats.primitives, stats.invalid),
+                (plain.primitives, plain.primitives, plain.invalid),
+                "{what}"
+            );
+            assert_eq!(
+                (v.nodes, v.leaves, v.max_depth),
+                (stats.nodes, stats.leaves, stats.max_depth),
+                "{what}"
+            );
+            assert!(
+                v.max_depth <= p.max_depth,
+                "{what}: depth {} > {}",
+                v.max_depth,
+                p.max_depth
+            );
+            assert!(v.max_leaf_size <= p.max_leaf_size, "{what}: leaf {}", v.max_leaf_size);
+            let cap = (f64::from(stats.primitives) * f64::from(sp.max_references)) as usize;
+            assert!(
+                bvh.prim_indices.len() <= cap,
+                "{what}: {} references",
+                bvh.prim_indices.len()
+            );
             check_trees(&tris, &bvh, &rays, &truth, 2, &what);
         }
     }

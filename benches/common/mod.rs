@@ -65,6 +65,21 @@ pub fn diffuse_rays(tris: &[Triangle], n: usize, scale: f32) -> Vec<Ray> {
         .collect()
 }
 
+/// Any-hit rays from `n` random surface points (started `scale * 1e-5` off the surface) to random
+/// points of `b`, `tmax` 1 on the unnormalised direction: shadow rays to scattered lights.
+pub fn shadow_rays(tris: &[Triangle], b: &Aabb, n: usize, scale: f32) -> Vec<Ray> {
+    let mut rng = Rng::new(6);
+    surface_points(tris, n, &mut rng)
+        .into_iter()
+        .map(|(p, nrm)| {
+            let o = p + nrm * scale * 1e-5;
+            let target = b.min + (b.max - b.min) * Vec3::new(rng.f32(), rng.f32(), rng.f32());
+            let d = target - o;
+            Ray::with_range(o, d, 0.0, 1.0)
+        })
+        .collect()
+}
+
 /// A triangle for the `bvh` crate (it stores each shape's leaf index in the shape).
 pub struct BvhCrateTri {
     pub a: nalgebra::Point3<f32>,

@@ -310,6 +310,7 @@ mod refit;
 mod reinsert;
 mod rotate;
 mod small;
+mod spatial;
 mod sweep;
 mod topdown;
 mod treelet;
@@ -326,6 +327,7 @@ pub(crate) use prims::usable_box;
 pub use prims::{MAX_PRIMITIVES, Primitives};
 pub use reinsert::{ReinsertParams, ReinsertStats};
 pub use rotate::RotationStats;
+pub use spatial::SpatialSplits;
 pub use treelet::TreeletStats;
 pub use validate::{BvhStats, ValidateError};
 

@@ -3,6 +3,7 @@
 
 use super::prims::{Primitives, usable_bounds};
 use super::{Bvh2, Node};
+use crate::geometry::{Aabb, Triangle, Triangles};
 use alloc::vec;
 use alloc::vec::Vec;
 
@@ -214,10 +215,17 @@ pub enum ValidateError {
         /// The primitive.
         prim: u32,
     },
-    /// A primitive's box is not inside its leaf's box.
+    /// A primitive's box is not inside its leaf's box ([`Bvh2::validate_split`]: does not even
+    /// touch it).
     PrimNotContained {
         /// The leaf.
         node: u32,
+        /// The primitive.
+        prim: u32,
+    },
+    /// [`Bvh2::validate_split`]: a vertex of a referenced triangle lies in no box of the leaves
+    /// that reference it.
+    PrimNotCovered {
         /// The primitive.
         prim: u32,
     },
@@ -251,6 +259,12 @@ impl core::fmt::Display for ValidateError {
             Self::PrimNotContained { node, prim } => {
                 write!(f, "leaf {node}: primitive {prim}'s box is not inside the leaf's")
             }
+            Self::PrimNotCovered { prim } => {
+                write!(
+                    f,
+                    "a vertex of triangle {prim} lies outside every leaf that references it"
+                )
+            }
         }
     }
 }
@@ -277,11 +291,49 @@ impl Bvh2 {
     /// assert!(matches!(bvh.validate(&tris[..]), Err(ValidateError::PrimReferencedTwice { .. })));
     /// ```
     pub fn validate<P: Primitives + ?Sized>(&self, prims: &P) -> Result<BvhStats, ValidateError> {
+        self.check_tree(prims, None::<fn(usize) -> Option<Triangle>>)
+    }
+
+    /// [`validate`](Self::validate) for trees with spatial splits
+    /// ([`build_spatial`](Self::build_spatial)), whose leaves may share a triangle and cut
+    /// through it: the same checks, except that a valid triangle must be referenced at least once
+    /// (never twice by one leaf), each referencing leaf's box must touch the triangle's box
+    /// (intersect it: [`ValidateError::PrimNotContained`] otherwise), and each of its vertices
+    /// must lie in the box of some leaf that references it ([`ValidateError::PrimNotCovered`]).
+    /// [`BvhStats::primitives`] counts distinct triangles; [`BvhStats::mean_leaf_size`]
+    /// references. A tree that passes [`validate`](Self::validate) passes this too.
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3, build::{Bvh2, BuildParams, SpatialSplits, ValidateError}};
+    /// let soup = strahl::scene::thin_soup(500, 1);
+    /// let (mut bvh, _) = Bvh2::build_spatial(&soup[..], &BuildParams::default(), &SpatialSplits::default()).unwrap();
+    /// let s = bvh.validate_split(&soup[..]).unwrap();
+    /// assert_eq!(s.primitives, 500);
+    /// assert!(bvh.validate(&soup[..]).is_err()); // shared or cut triangles
+    /// // A leaf box shrunk to a point misses its triangles' vertices.
+    /// let leaf = bvh.nodes.iter().position(|n| n.is_leaf()).unwrap();
+    /// bvh.nodes[leaf].set_aabb(&Aabb::new(Vec3::splat(9.0), Vec3::splat(9.0)));
+    /// assert!(bvh.validate_split(&soup[..]).is_err());
+    /// ```
+    pub fn validate_split<P: Triangles + ?Sized>(&self, tris: &P) -> Result<BvhStats, ValidateError> {
+        self.check_tree(tris, Some(|i| tris.triangle(i)))
+    }
+
+    /// [`validate`](Self::validate), or with `split` (the triangles) [`validate_split`](Self::validate_split).
+    fn check_tree<P: Primitives + ?Sized, V: Fn(usize) -> Option<Triangle>>(
+        &self,
+        prims: &P,
+        split: Option<V>,
+    ) -> Result<BvhStats, ValidateError> {
         let nodes = &self.nodes;
         let total = prims.prim_count();
         let mut node_seen = vec![false; nodes.len()];
         let mut slot_seen = vec![false; self.prim_indices.len()];
-        let mut prim_seen = vec![false; total];
+        // The last leaf that referenced each primitive (`u32::MAX`: none yet), and with `split`
+        // which of its vertices some referencing leaf's box holds (bits 0-2).
+        let mut prim_seen = vec![u32::MAX; total];
+        let mut covered = vec![0u8; if split.is_some() { total } else { 0 }];
+        let mut slots = 0u64;
         let mut stats = BvhStats::default();
         let mut depth_sum = 0u64;
         let mut stack: Vec<(u32, u32)> = Vec::new();
@@ -333,16 +385,30 @@ impl Bvh2 {
                             prim,
                         });
                     };
-                    if core::mem::replace(seen, true) {
+                    let before = core::mem::replace(seen, i);
+                    if before == i || (before != u32::MAX && split.is_none()) {
                         return Err(ValidateError::PrimReferencedTwice { prim });
                     }
                     let Some(pb) = usable_bounds(prims, prim as usize) else {
                         return Err(ValidateError::InvalidPrimReferenced { prim });
                     };
-                    if !b.contains(&pb) {
+                    slots += 1;
+                    stats.primitives += u32::from(before == u32::MAX);
+                    if let Some(tri) = split.as_ref() {
+                        let touch = Aabb::new(b.min.max(pb.min), b.max.min(pb.max));
+                        if touch.is_empty() {
+                            return Err(ValidateError::PrimNotContained { node: i, prim });
+                        }
+                        if let (Some(t), Some(c)) = (tri(prim as usize), covered.get_mut(prim as usize)) {
+                            for (k, v) in t.iter().enumerate() {
+                                if b.contains_point(*v) {
+                                    *c |= 1 << k;
+                                }
+                            }
+                        }
+                    } else if !b.contains(&pb) {
                         return Err(ValidateError::PrimNotContained { node: i, prim });
                     }
-                    stats.primitives += 1;
                 }
             } else {
                 let l = node.left();
@@ -367,12 +433,19 @@ impl Bvh2 {
             return Err(ValidateError::SlotUnused { slot: s as u32 });
         }
         for (p, seen) in prim_seen.iter().enumerate() {
-            if !seen && usable_bounds(prims, p).is_some() {
+            if *seen == u32::MAX && usable_bounds(prims, p).is_some() {
                 return Err(ValidateError::PrimMissing { prim: p as u32 });
             }
         }
+        if let Some(p) = covered
+            .iter()
+            .zip(&prim_seen)
+            .position(|(&c, &s)| s != u32::MAX && c != 7)
+        {
+            return Err(ValidateError::PrimNotCovered { prim: p as u32 });
+        }
         if stats.leaves > 0 {
-            stats.mean_leaf_size = stats.primitives as f32 / stats.leaves as f32;
+            stats.mean_leaf_size = slots as f32 / stats.leaves as f32;
             stats.mean_leaf_depth = (depth_sum as f64 / stats.leaves as f64) as f32;
         }
         Ok(stats)

@@ -1,0 +1,705 @@
+//! Spatial splits: the SBVH of Stich, Friedrich and Dietrich ("Spatial Splits in Bounding Volume
+//! Hierarchies", 2009), [`Bvh2::build_spatial`].
+//!
+//! A top-down SAH build whose nodes may also split *space*: a plane cuts the node's box, every
+//! triangle reference that straddles it is clipped into a left and a right part, and each part's
+//! box is that of the triangle clipped to the side, within the reference's box. Long thin or
+//! large triangles, whose boxes overlap many others, then stop spoiling every node above them.
+//! The price is references: a triangle may sit in several leaves (a hit is still one triangle;
+//! a [`HitFilter`](crate::traverse::HitFilter) may see it once per leaf, as with Embree's
+//! spatial splits), and a leaf's box may no longer contain its triangles whole
+//! ([`Bvh2::validate_split`] checks such trees).
+//!
+//! Per node, as in the paper: the best object split (binned SAH over centroids,
+//! [`BuildParams::bins`] per axis, all three axes); if its children's boxes overlap by more than
+//! [`SpatialSplits::alpha`] of the root's area (the paper's restriction: spatial splits only where
+//! object splits leave overlap), also the best spatial split ([`SpatialSplits::bins`] planes per
+//! axis, "chopped binning": each reference clipped into every bin it spans); then a leaf, the
+//! object split or the spatial split, whichever the SAH prices lowest. Executing a spatial split
+//! "unsplits" a straddling reference where putting it whole on one side is cheaper (the paper's
+//! reference unsplitting). [`SpatialSplits::max_references`] caps the references (a multiple of
+//! the valid triangles); where it is spent, only object splits remain.
+//!
+//! Every clipped box is conservative: the crossing points of the triangle's edges with the plane
+//! are widened by a bound on their rounding before they enter a box, and each part's box is
+//! intersected with (so never larger than) the reference's. Every point of a triangle thus lies
+//! in the box of some leaf that references it, which is what the traversals need (tested against
+//! brute force, `tests/spatial.rs`).
+//!
+//! Bad input is handled as by [`Bvh2::build`]: triangles with a non-finite vertex are left out
+//! and counted ([`BuildStats::invalid`]); no split that fails to shrink both sides is taken; a
+//! subtree that could not finish within [`BuildParams::max_depth`] is split at its object median
+//! ([`BuildStats::forced_splits`]).
+
+use super::prims::usable_bounds;
+use super::topdown::split_cost;
+use super::{BuildError, BuildParams, BuildStats, Bvh2, MAX_PRIMITIVES, Node};
+use crate::geometry::{Aabb, Triangle, Triangles};
+use alloc::vec::Vec;
+use glam::Vec3;
+
+/// The knobs of [`Bvh2::build_spatial`] beyond [`BuildParams`].
+///
+/// ```
+/// use strahl::build::SpatialSplits;
+/// let s = SpatialSplits::default();
+/// assert_eq!((s.alpha, s.max_references, s.bins, s.min_node_size), (1e-5, 1.5, 16, 64));
+/// assert!(s.check().is_ok());
+/// assert!(SpatialSplits { max_references: 0.5, ..s }.check().is_err()); // below one per triangle
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpatialSplits {
+    /// Spatial splits are tried only at nodes whose best object split leaves children that
+    /// overlap by more than `alpha` times the root's surface area (Stich et al.'s restriction;
+    /// `1e-5` there and here). `0` tries them everywhere. Finite, `>= 0`.
+    pub alpha: f32,
+    /// Most references the tree may hold, as a multiple of the valid triangles: `1.0` allows no
+    /// spatial split, `1.5` (the default) half again as many. In `1.0 ..= 16.0`.
+    pub max_references: f32,
+    /// Planes per axis of the spatial-split search, in [`MIN_BINS`](super::MIN_BINS)`..=`
+    /// [`MAX_BINS`](super::MAX_BINS).
+    pub bins: u32,
+    /// Spatial splits are searched only at nodes of at least this many references (`>= 2`):
+    /// the search clips every reference into every bin it spans, the costliest part of the
+    /// build, and the small nodes near the leaves gain least from it.
+    pub min_node_size: u32,
+}
+
+impl Default for SpatialSplits {
+    fn default() -> Self {
+        Self {
+            alpha: 1e-5,
+            max_references: 1.5,
+            bins: 16,
+            min_node_size: 64,
+        }
+    }
+}
+
+impl SpatialSplits {
+    /// `Ok` if every field is in its documented range.
+    ///
+    /// ```
+    /// use strahl::build::SpatialSplits;
+    /// assert!(SpatialSplits { alpha: f32::NAN, ..Default::default() }.check().is_err());
+    /// assert!(SpatialSplits { bins: 3, ..Default::default() }.check().is_err());
+    /// ```
+    pub fn check(&self) -> Result<(), BuildError> {
+        let bad = |what| Err(BuildError::InvalidParams(what));
+        if !(self.alpha.is_finite() && self.alpha >= 0.0) {
+            return bad("spatial splits: alpha must be finite and >= 0");
+        }
+        if !(1.0..=16.0).contains(&self.max_references) {
+            return bad("spatial splits: max_references must be in 1 ..= 16");
+        }
+        if !(super::MIN_BINS..=super::MAX_BINS).contains(&self.bins) {
+            return bad("spatial splits: bins must be in 4 ..= 64");
+        }
+        if self.min_node_size < 2 {
+            return bad("spatial splits: min_node_size must be >= 2");
+        }
+        Ok(())
+    }
+}
+
+/// One reference: a triangle, or the part of it within `b`.
+#[derive(Clone, Copy)]
+struct Ref {
+    b: Aabb,
+    prim: u32,
+}
+
+/// A node still to build: its references are `buf[begin..end]`, always the top of the buffer.
+struct Task {
+    begin: usize,
+    end: usize,
+    slot: u32,
+    depth: u32,
+    bounds: Aabb,
+}
+
+/// The chosen split of a node.
+#[derive(Clone, Copy)]
+enum Split {
+    /// Centroid bin `plane` and below on `axis` go left (bins of the node's centroid bounds).
+    Object { axis: usize, plane: usize, cost: f32 },
+    /// Plane `lo + (plane + 1) * width` on `axis` (the node's box cut into bins).
+    Spatial {
+        axis: usize,
+        pos: f32,
+        cost: f32,
+        left: Aabb,
+        right: Aabb,
+        nl: u32,
+        nr: u32,
+    },
+}
+
+impl Split {
+    /// The split's SAH sum `A(L) N_L + A(R) N_R`.
+    fn cost(self) -> f32 {
+        match self {
+            Self::Object { cost, .. } | Self::Spatial { cost, .. } => cost,
+        }
+    }
+}
+
+/// Scratch of one build, reused from node to node.
+#[derive(Default)]
+struct Scratch {
+    bins: Vec<(Aabb, u32)>,
+    sbins: Vec<(Aabb, u32, u32)>,
+    suffix: Vec<(Aabb, u32)>,
+    left: Vec<Ref>,
+    right: Vec<Ref>,
+}
+
+/// `min(a, b)` per component, as boxes are intersected.
+#[inline]
+fn intersect(a: &Aabb, b: &Aabb) -> Aabb {
+    Aabb::new(a.min.max(b.min), a.max.min(b.max))
+}
+
+#[inline]
+fn area(b: &Aabb) -> f32 {
+    b.half_area()
+}
+
+/// Triangle `t` clipped at `pos` on `axis`, within `within`: the boxes of its parts on either
+/// side (either may be empty). Conservative: see the module docs.
+#[inline(always)]
+pub(crate) fn clip(t: &Triangle, within: &Aabb, axis: usize, pos: f32) -> (Aabb, Aabb) {
+    let (mut l, mut r) = (Aabb::EMPTY, Aabb::EMPTY);
+    for e in 0..3 {
+        let (v0, v1) = (t[e], t[(e + 1) % 3]);
+        let (p0, p1) = (v0[axis], v1[axis]);
+        if p0 <= pos {
+            l.grow(v0);
+        }
+        if p0 >= pos {
+            r.grow(v0);
+        }
+        if (p0 < pos && pos < p1) || (p1 < pos && pos < p0) {
+            let s = ((pos - p0) / (p1 - p0)).clamp(0.0, 1.0);
+            let mut x = v0 + (v1 - v0) * s;
+            // NOTE: `x` carries a few roundings of the vertices' magnitudes (a subtraction, a
+            // division, a product, a sum); widen by eight units of the larger magnitude and the
+            // smallest normal, then put the split coordinate exactly on the plane.
+            let mut pad = v0.abs().max(v1.abs()) * (8.0 * f32::EPSILON) + Vec3::splat(f32::MIN_POSITIVE);
+            x[axis] = pos;
+            pad[axis] = 0.0;
+            for side in [&mut l, &mut r] {
+                side.grow(x - pad);
+                side.grow(x + pad);
+            }
+        }
+    }
+    (intersect(&l, within), intersect(&r, within))
+}
+
+impl Bvh2 {
+    /// Builds a tree with spatial splits (SBVH, Stich et al. 2009; see
+    /// [`SpatialSplits`] and the [`spatial`](self) notes in the module docs): triangles only,
+    /// since references are clipped against planes. From `params` it takes the costs, the leaf
+    /// sizes, `bins` (the object splits' binning) and `max_depth`; the other fields are not used
+    /// (`refine` included: the refinement passes would recompute boxes from whole triangles).
+    ///
+    /// A triangle may be referenced by several leaves (`prim_indices` holds at most
+    /// `max_references` times the valid triangles), and leaf boxes may cut through triangles:
+    /// check such trees with [`validate_split`](Self::validate_split). The wide collapse and every
+    /// traversal take them as they are; [`refit`](Self::refit) makes boxes of whole triangles
+    /// again (valid, but without the splits' gain).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{BuildParams, Bvh2, SpatialSplits}, traverse::Moller};
+    /// let soup = strahl::scene::thin_soup(2_000, 7); // long thin triangles
+    /// let p = BuildParams::quality();
+    /// let (sbvh, stats) = Bvh2::build_spatial(&soup[..], &p, &SpatialSplits::default()).unwrap();
+    /// assert!(sbvh.validate_split(&soup[..]).is_ok());
+    /// assert_eq!(stats.primitives, 2_000);
+    /// assert!(sbvh.prim_indices.len() > 2_000 && sbvh.prim_indices.len() <= 3_000);
+    /// let (plain, _) = Bvh2::build(&soup[..], &p).unwrap();
+    /// assert!(sbvh.sah_cost(1.0, 1.0) < plain.sah_cost(1.0, 1.0));
+    /// let ray = Ray::new(Vec3::new(0.5, 0.5, -1.0), Vec3::Z);
+    /// assert_eq!(sbvh.intersect::<Moller, _>(&soup[..], &ray), plain.intersect::<Moller, _>(&soup[..], &ray));
+    /// ```
+    pub fn build_spatial<P: Triangles + ?Sized>(
+        tris: &P,
+        params: &BuildParams,
+        splits: &SpatialSplits,
+    ) -> Result<(Bvh2, BuildStats), BuildError> {
+        params.check()?;
+        splits.check()?;
+        let total = tris.len();
+        if total > MAX_PRIMITIVES {
+            return Err(BuildError::TooManyPrimitives { count: total });
+        }
+        let mut out = Bvh2::default();
+        let mut stats = BuildStats::default();
+        let mut buf: Vec<Ref> = Vec::with_capacity(total);
+        let mut root = Aabb::EMPTY;
+        for i in 0..total {
+            match usable_bounds(tris, i) {
+                Some(b) => {
+                    root.grow_aabb(&b);
+                    buf.push(Ref { b, prim: i as u32 });
+                }
+                None => stats.invalid += 1,
+            }
+        }
+        let n = buf.len();
+        stats.primitives = n as u32;
+        if n == 0 {
+            return Ok((out, stats));
+        }
+        // Within `MAX_PRIMITIVES` (so every slot fits a `u32`).
+        let budget = ((n as f64 * f64::from(splits.max_references)) as usize).min(MAX_PRIMITIVES);
+        let mut live = n;
+        let root_area = area(&root);
+        let mut s = Scratch::default();
+        out.nodes.push(Node::leaf(&root, 0, 1));
+        out.prim_indices.reserve(n);
+        let mut tasks = alloc::vec![Task {
+            begin: 0,
+            end: n,
+            slot: 0,
+            depth: 1,
+            bounds: root,
+        }];
+        while let Some(t) = tasks.pop() {
+            let count = t.end - t.begin;
+            let node_area = area(&t.bounds);
+            stats.max_depth = stats.max_depth.max(t.depth);
+            let leaf_ok = count as u32 <= params.max_leaf_size;
+            // A subtree of `count` references split at medians needs `ceil(log2 count)` levels.
+            let levels = usize::BITS - (count.max(1) - 1).leading_zeros();
+            let forced = t.depth + levels >= params.max_depth;
+            let mut object = None;
+            let mut choice = None;
+            if count as u32 > params.min_leaf_size && !forced {
+                let refs = &buf[t.begin..t.end];
+                let best = best_object(refs, params.bins as usize, &mut s);
+                let try_spatial = live < budget
+                    && count >= splits.min_node_size as usize
+                    && match best {
+                        Some((_, _, _, ref lb, ref rb)) => area(&intersect(lb, rb)) > splits.alpha * root_area,
+                        None => true,
+                    };
+                object = best.map(|(axis, plane, cost, _, _)| Split::Object { axis, plane, cost });
+                choice = object;
+                if try_spatial
+                    && let Some(sp) = best_spatial(tris, refs, &t.bounds, splits.bins as usize, budget - live, &mut s)
+                    && sp.cost() < choice.map_or(f32::INFINITY, Split::cost)
+                {
+                    choice = Some(sp);
+                }
+                if let Some(c) = choice
+                    && leaf_ok
+                    && params.intersection_cost * count as f32 <= split_cost(params, c.cost(), node_area, count as u32)
+                {
+                    choice = None;
+                    object = None;
+                }
+            }
+            let leaf = count as u32 <= params.min_leaf_size || (choice.is_none() && (leaf_ok || count < 2));
+            if leaf {
+                let first = out.prim_indices.len() as u32;
+                out.prim_indices.extend(buf[t.begin..t.end].iter().map(|r| r.prim));
+                out.nodes[t.slot as usize] = Node::leaf(&t.bounds, first, count as u32);
+                stats.leaves += 1;
+                buf.truncate(t.begin);
+                continue;
+            }
+            // Into `s.left` and `s.right`. A spatial split that fails to shrink both sides falls
+            // back to the object split; one whose bins put every centroid on one side, or none
+            // (the depth bound, coincident centroids), to the median.
+            let mut done = false;
+            if let Some(Split::Spatial {
+                axis,
+                pos,
+                left,
+                right,
+                nl,
+                nr,
+                ..
+            }) = choice
+            {
+                done = split_spatial(tris, &buf[t.begin..t.end], axis, pos, (left, nl), (right, nr), &mut s)
+                    && s.left.len() < count
+                    && s.right.len() < count
+                    && live + s.left.len() + s.right.len() - count <= budget;
+            }
+            if !done && let Some(Split::Object { axis, plane, .. }) = object {
+                s.left.clear();
+                s.right.clear();
+                let refs = &buf[t.begin..t.end];
+                let (lo, scale) = centroid_binning(refs, params.bins as usize)[axis];
+                for r in refs {
+                    let c = r.b.min[axis] + r.b.max[axis];
+                    let bin = (((c - lo) * scale) as usize).min(params.bins as usize - 1);
+                    if bin <= plane {
+                        s.left.push(*r);
+                    } else {
+                        s.right.push(*r);
+                    }
+                }
+                done = !s.left.is_empty() && !s.right.is_empty();
+            }
+            if !done {
+                stats.forced_splits += 1;
+                let refs = &mut buf[t.begin..t.end];
+                median(refs);
+                s.left.clear();
+                s.right.clear();
+                s.left.extend_from_slice(&refs[..count / 2]);
+                s.right.extend_from_slice(&refs[count / 2..]);
+            }
+            live = live + s.left.len() + s.right.len() - count;
+            buf.truncate(t.begin);
+            let (nl, nr) = (s.left.len(), s.right.len());
+            let lb = s.left.iter().fold(Aabb::EMPTY, |a, r| a.union(&r.b));
+            let rb = s.right.iter().fold(Aabb::EMPTY, |a, r| a.union(&r.b));
+            buf.extend_from_slice(&s.left);
+            buf.extend_from_slice(&s.right);
+            let l = out.nodes.len() as u32;
+            out.nodes[t.slot as usize] = Node::interior(&t.bounds, l);
+            out.nodes.push(Node::leaf(&lb, 0, 1));
+            out.nodes.push(Node::leaf(&rb, 0, 1));
+            tasks.push(Task {
+                begin: t.begin,
+                end: t.begin + nl,
+                slot: l,
+                depth: t.depth + 1,
+                bounds: lb,
+            });
+            tasks.push(Task {
+                begin: t.begin + nl,
+                end: t.begin + nl + nr,
+                slot: l + 1,
+                depth: t.depth + 1,
+                bounds: rb,
+            });
+        }
+        stats.nodes = out.nodes.len() as u32;
+        Ok((out, stats))
+    }
+}
+
+/// Per axis, the origin and scale that put doubled centroids `min + max` of `refs` into `bins`
+/// bins (scale 0 on a flat axis: everything in bin 0).
+fn centroid_binning(refs: &[Ref], bins: usize) -> [(f32, f32); 3] {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for r in refs {
+        let c = r.b.min + r.b.max;
+        lo = lo.min(c);
+        hi = hi.max(c);
+    }
+    let ext = hi - lo;
+    core::array::from_fn(|a| {
+        let scale = if ext[a] > 0.0 {
+            bins as f32 * (1.0 - 1e-6) / ext[a]
+        } else {
+            0.0
+        };
+        (lo[a], if scale.is_finite() { scale } else { 0.0 })
+    })
+}
+
+/// The cheapest binned object split of `refs`: axis, last left bin, SAH sum
+/// `A(L) N_L + A(R) N_R` and both boxes; `None` where every axis is flat or no plane has
+/// references on both sides.
+fn best_object(refs: &[Ref], bins: usize, s: &mut Scratch) -> Option<(usize, usize, f32, Aabb, Aabb)> {
+    let binning = centroid_binning(refs, bins);
+    let mut best: Option<(usize, usize, f32, Aabb, Aabb)> = None;
+    for (axis, &(lo, scale)) in binning.iter().enumerate() {
+        if scale == 0.0 {
+            continue;
+        }
+        s.bins.clear();
+        s.bins.resize(bins, (Aabb::EMPTY, 0));
+        for r in refs {
+            let c = r.b.min[axis] + r.b.max[axis];
+            let bin = (((c - lo) * scale) as usize).min(bins - 1);
+            s.bins[bin].0.grow_aabb(&r.b);
+            s.bins[bin].1 += 1;
+        }
+        sweep(&s.bins, &mut s.suffix, |plane, cost, lb, rb| {
+            if best.is_none_or(|b| cost < b.2) {
+                best = Some((axis, plane, cost, lb, rb));
+            }
+        });
+    }
+    best
+}
+
+/// Every plane between `bins` (box and count each): `f(plane, A(L) N_L + A(R) N_R, L, R)` for
+/// the planes with references on both sides (`plane` = last bin on the left).
+fn sweep(bins: &[(Aabb, u32)], suffix: &mut Vec<(Aabb, u32)>, mut f: impl FnMut(usize, f32, Aabb, Aabb)) {
+    suffix.clear();
+    suffix.resize(bins.len(), (Aabb::EMPTY, 0));
+    let mut acc = (Aabb::EMPTY, 0u32);
+    for i in (0..bins.len()).rev() {
+        acc = (acc.0.union(&bins[i].0), acc.1 + bins[i].1);
+        suffix[i] = acc;
+    }
+    let mut left = (Aabb::EMPTY, 0u32);
+    for i in 0..bins.len().saturating_sub(1) {
+        left = (left.0.union(&bins[i].0), left.1 + bins[i].1);
+        let right = suffix[i + 1];
+        if left.1 > 0 && right.1 > 0 {
+            let cost = area(&left.0) * left.1 as f32 + area(&right.0) * right.1 as f32;
+            f(i, cost, left.0, right.0);
+        }
+    }
+}
+
+/// The cheapest spatial split of `refs` (box `bounds`) that adds at most `spare` references.
+fn best_spatial<P: Triangles + ?Sized>(
+    tris: &P,
+    refs: &[Ref],
+    bounds: &Aabb,
+    bins: usize,
+    spare: usize,
+    s: &mut Scratch,
+) -> Option<Split> {
+    let n = refs.len() as u32;
+    let mut best: Option<Split> = None;
+    for axis in 0..3 {
+        let (lo, hi) = (bounds.min[axis], bounds.max[axis]);
+        let width = (hi - lo) / bins as f32;
+        if !(width > 0.0 && width.is_finite()) || lo + width == lo {
+            continue;
+        }
+        let inv = 1.0 / width;
+        let bin_of = |x: f32| (((x - lo) * inv).max(0.0) as usize).min(bins - 1);
+        s.sbins.clear();
+        s.sbins.resize(bins, (Aabb::EMPTY, 0, 0));
+        for r in refs {
+            let (first, last) = (bin_of(r.b.min[axis]), bin_of(r.b.max[axis]));
+            s.sbins[first].1 += 1;
+            s.sbins[last].2 += 1;
+            if first == last {
+                s.sbins[first].0.grow_aabb(&r.b);
+                continue;
+            }
+            let Some(t) = tris.triangle(r.prim as usize) else {
+                continue;
+            };
+            let mut rest = r.b;
+            for k in first..last {
+                let (l, rr) = clip(&t, &rest, axis, lo + (k + 1) as f32 * width);
+                s.sbins[k].0.grow_aabb(&l);
+                rest = rr;
+            }
+            s.sbins[last].0.grow_aabb(&rest);
+        }
+        // Left of plane k: references entering at or before bin k; right: leaving after it.
+        let mut right_box = [Aabb::EMPTY; super::MAX_BINS as usize];
+        let mut acc = Aabb::EMPTY;
+        for k in (0..bins).rev() {
+            acc = acc.union(&s.sbins[k].0);
+            right_box[k] = acc;
+        }
+        let (mut lb, mut nl, mut nr) = (Aabb::EMPTY, 0u32, n);
+        for k in 0..bins - 1 {
+            lb = lb.union(&s.sbins[k].0);
+            nl += s.sbins[k].1;
+            nr -= s.sbins[k].2;
+            let rb = right_box[k + 1];
+            if nl == 0 || nr == 0 || nl >= n && nr >= n || (nl + nr - n) as usize > spare {
+                continue;
+            }
+            let cost = area(&lb) * nl as f32 + area(&rb) * nr as f32;
+            if best.is_none_or(|b| matches!(b, Split::Spatial { cost: c, .. } if cost < c)) {
+                best = Some(Split::Spatial {
+                    axis,
+                    pos: lo + (k + 1) as f32 * width,
+                    cost,
+                    left: lb,
+                    right: rb,
+                    nl,
+                    nr,
+                });
+            }
+        }
+    }
+    best
+}
+
+/// Puts `refs` into `s.left` and `s.right` by the plane `pos` on `axis`, clipping the straddling
+/// ones unless one side can take them whole for less (reference unsplitting). `left` and `right`
+/// are the binned estimate of the sides (box, count), which the unsplitting test prices against.
+/// `false` if a side stays empty.
+fn split_spatial<P: Triangles + ?Sized>(
+    tris: &P,
+    refs: &[Ref],
+    axis: usize,
+    pos: f32,
+    (mut lb, mut nl): (Aabb, u32),
+    (mut rb, mut nr): (Aabb, u32),
+    s: &mut Scratch,
+) -> bool {
+    s.left.clear();
+    s.right.clear();
+    for r in refs {
+        if r.b.max[axis] <= pos {
+            s.left.push(*r);
+        } else if r.b.min[axis] >= pos {
+            s.right.push(*r);
+        } else {
+            let Some(t) = tris.triangle(r.prim as usize) else {
+                s.left.push(*r);
+                continue;
+            };
+            let (l, rr) = clip(&t, &r.b, axis, pos);
+            match (l.is_empty(), rr.is_empty()) {
+                (true, true) => s.left.push(*r),
+                (false, true) => s.left.push(Ref { b: l, prim: r.prim }),
+                (true, false) => s.right.push(Ref { b: rr, prim: r.prim }),
+                (false, false) => {
+                    let (nlf, nrf) = (nl as f32, nr as f32);
+                    let split = area(&lb) * nlf + area(&rb) * nrf;
+                    let to_left = area(&lb.union(&r.b)) * nlf + area(&rb) * (nrf - 1.0);
+                    let to_right = area(&lb) * (nlf - 1.0) + area(&rb.union(&r.b)) * nrf;
+                    if to_left < split && to_left <= to_right && nr > 1 {
+                        s.left.push(*r);
+                        lb = lb.union(&r.b);
+                        nr -= 1;
+                    } else if to_right < split && nl > 1 {
+                        s.right.push(*r);
+                        rb = rb.union(&r.b);
+                        nl -= 1;
+                    } else {
+                        s.left.push(Ref { b: l, prim: r.prim });
+                        s.right.push(Ref { b: rr, prim: r.prim });
+                    }
+                }
+            }
+        }
+    }
+    !s.left.is_empty() && !s.right.is_empty()
+}
+
+/// Orders `refs` so that the first half holds the smaller centroids on the longest centroid axis.
+fn median(refs: &mut [Ref]) {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for r in refs.iter() {
+        let c = r.b.min + r.b.max;
+        lo = lo.min(c);
+        hi = hi.max(c);
+    }
+    let e = hi - lo;
+    let axis = if e.x >= e.y && e.x >= e.z {
+        0
+    } else if e.y >= e.z {
+        1
+    } else {
+        2
+    };
+    let half = refs.len() / 2;
+    if half > 0 {
+        refs.select_nth_unstable_by(half, |a, b| {
+            let (ca, cb) = (a.b.min[axis] + a.b.max[axis], b.b.min[axis] + b.b.max[axis]);
+            ca.total_cmp(&cb)
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Rng;
+
+    /// Every point of a triangle (vertices, and barycentric points computed in f64 and rounded
+    /// once) inside the reference's box lies in the box of each side it is on, over magnitudes
+    /// from 1e-30 to 1e33, needles and sub-boxes; the boxes stay within the reference's and on
+    /// their side of the plane.
+    #[test]
+    fn clip_is_conservative() {
+        let mut r = Rng::new(11);
+        let (mut checked, mut crossings) = (0, 0);
+        for case in 0..4_000 {
+            let scale = [1.0, 1e-30, 1e30, 3.0e5][case % 4];
+            let offset = Vec3::new(r.f32(), r.f32(), r.f32()) * scale * [0.0, 1.0, 1e3][case % 3];
+            let mut t: Triangle = [0, 1, 2].map(|_| offset + Vec3::new(r.f32(), r.f32(), r.f32()) * scale);
+            if case % 7 == 0 {
+                t[2] = t[0] + (t[1] - t[0]) * 1e-3; // a needle
+            }
+            let tb = Aabb::from_points(&t);
+            // Within the triangle's box, or a random sub-box of it (a reference clipped before).
+            let within = if case % 2 == 0 {
+                tb
+            } else {
+                let a = tb.min + (tb.max - tb.min) * Vec3::new(r.f32(), r.f32(), r.f32()) * 0.5;
+                let b = tb.max - (tb.max - tb.min) * Vec3::new(r.f32(), r.f32(), r.f32()) * 0.5;
+                Aabb::new(a, b)
+            };
+            let axis = case % 3;
+            let pos = tb.min[axis] + (tb.max[axis] - tb.min[axis]) * r.f32();
+            let (l, rt) = clip(&t, &within, axis, pos);
+            for side in [&l, &rt] {
+                assert!(
+                    side.is_empty() || within.contains(side),
+                    "{case}: {side:?} outside {within:?}"
+                );
+            }
+            assert!(l.is_empty() || l.max[axis] <= pos);
+            assert!(rt.is_empty() || rt.min[axis] >= pos);
+            // Where the edges cross the plane (in f64, rounded once): in both boxes, if inside
+            // `within`. These are the points the clipping computes, with its rounding.
+            for e in 0..3 {
+                let (v0, v1) = (t[e], t[(e + 1) % 3]);
+                let (p0, p1) = (v0[axis] as f64, v1[axis] as f64);
+                if (p0 < pos as f64) == (p1 < pos as f64) || p0 == p1 {
+                    continue;
+                }
+                let s = (pos as f64 - p0) / (p1 - p0);
+                let x = Vec3::from_array(core::array::from_fn(|a| {
+                    (v0[a] as f64 + (v1[a] as f64 - v0[a] as f64) * s) as f32
+                }));
+                if within.contains_point(x) {
+                    assert!(
+                        l.contains_point(x) && rt.contains_point(x),
+                        "{case}: crossing {x:?} not in {l:?} and {rt:?}"
+                    );
+                    crossings += 1;
+                }
+            }
+            // Points of the triangle (barycentric in f64, rounded once) inside `within`.
+            for k in 0..200 {
+                let (mut u, mut v) = (r.f32() as f64, r.f32() as f64);
+                if u + v > 1.0 {
+                    (u, v) = (1.0 - u, 1.0 - v);
+                }
+                if k < 3 {
+                    (u, v) = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)][k];
+                }
+                let exact: [f64; 3] = core::array::from_fn(|a| {
+                    let (a0, a1, a2) = (t[0][a] as f64, t[1][a] as f64, t[2][a] as f64);
+                    a0 + (a1 - a0) * u + (a2 - a0) * v
+                });
+                let p = Vec3::from_array(exact.map(|x| x as f32));
+                if !within.contains_point(p) {
+                    continue;
+                }
+                // The side by the exact point: rounding may move a point of a slanted triangle
+                // onto the plane, far along the plane from where the triangle crosses it.
+                let side = exact[axis];
+                if side <= pos as f64 {
+                    assert!(
+                        l.contains_point(p),
+                        "{case}: {p:?} (left of {pos} on {axis}) not in {l:?}, triangle {t:?}"
+                    );
+                }
+                if side >= pos as f64 {
+                    assert!(
+                        rt.contains_point(p),
+                        "{case}: {p:?} (right of {pos} on {axis}) not in {rt:?}, triangle {t:?}"
+                    );
+                }
+                checked += 1;
+            }
+        }
+        assert!(checked > 100_000 && crossings > 2_000, "{checked} {crossings}");
+    }
+}
