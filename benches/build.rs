@@ -41,14 +41,16 @@
 //! - `peer/embree/<quality>` (feature `embree`): Embree 3's `rtcBuildBVH` over the triangles'
 //!   boxes, branching factor 2, leaves of 1 to 8, `C_T = C_I = 1`, a device with one thread; its
 //!   callbacks create the nodes in Embree's allocator. Warm: one `RTCBVH` rebuilt; cold: a new one
-//!   per build. `low` is its Morton builder, `medium` binned SAH; `high` would add spatial splits,
-//!   which need a split callback (and duplicate primitives), so without one Embree runs the binned
-//!   SAH builder for it as well.
+//!   per build. `low` is its Morton builder, `medium` binned SAH; `high` adds spatial splits only
+//!   with a split callback, so without one Embree runs the binned SAH builder for it as well;
+//!   `high+splits` gives one (`splitPrimitive`, clipping with `strahl::build::clip_triangle`, room
+//!   for up to 2 references per triangle): Embree's spatial-split builder, the peer of strahl's
+//!   `spatial` members (both checked with `Bvh2::validate_split`).
 //!
 //! Every peer's build time includes computing the triangles' boxes, as strahl's does. Each peer's
 //! tree is then converted (untimed) to a strahl `Bvh2`, depth first with siblings adjacent and the
 //! leaves' primitives in leaf order (the layout strahl's top-down builders make), checked with
-//! `Bvh2::validate`, and measured as strahl's trees are: `sah_cost(1.0, 1.0)` and the scalar
+//! `Bvh2::validate` (`validate_split` for spatial splits), and measured as strahl's trees are: `sah_cost(1.0, 1.0)` and the scalar
 //! trace, which must find the same number of hits for every tree.
 //!
 //! # Pareto data
@@ -73,7 +75,8 @@ use std::fmt::Write as _;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 use strahl::build::{
-    BinAxes, BuildParams, Builder, Bvh2, BvhStats, MortonBits, Node, Refine, ReinsertParams, TreeletParams,
+    BinAxes, BuildParams, Builder, Bvh2, BvhStats, MortonBits, Node, Refine, ReinsertParams, SpatialSplits,
+    TreeletParams,
 };
 use strahl::geometry::Triangle;
 use strahl::layout::{Bvh4, Bvh8};
@@ -218,6 +221,22 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
     ]
 }
 
+/// strahl's spatial-split builds (`Bvh2::build_spatial`): cold builds only (no reusable
+/// builder), checked with `validate_split` (their leaves share and cut triangles).
+fn spatial_builders() -> Vec<(&'static str, BuildParams, SpatialSplits)> {
+    vec![
+        ("spatial (sbvh)", BuildParams::default(), SpatialSplits::default()),
+        (
+            "spatial, binned64-all",
+            BuildParams {
+                bins: 64,
+                ..BuildParams::default()
+            },
+            SpatialSplits::default(),
+        ),
+    ]
+}
+
 // ---- peers: each keeps its input (prepared untimed) and its last tree ----
 
 /// A peer builder. `cold` and `warm` return the time of one build (the previous tree is dropped
@@ -231,6 +250,11 @@ trait Peer {
     fn warm(&mut self) -> Option<Duration>;
     /// The last tree (cold, else warm) as a `Bvh2`.
     fn tree(&self) -> Bvh2;
+    /// Whether its leaves may share and cut primitives (spatial splits: checked with
+    /// `validate_split`).
+    fn split(&self) -> bool {
+        false
+    }
 }
 
 /// Converts a peer's binary tree to a `Bvh2`: depth first, each pair of siblings allocated
@@ -461,6 +485,8 @@ struct EmbreePeer<'d> {
     device: &'d peers::embree::Device,
     settings: peers::embree::TreeSettings,
     label: &'static str,
+    /// Spatial splits (`BuiltTree::build_split`).
+    split: bool,
     tris: Vec<Triangle>,
     boxes: Vec<Aabb>,
     cold_out: Option<peers::embree::BuiltTree<'d>>,
@@ -474,6 +500,7 @@ impl<'d> EmbreePeer<'d> {
         tris: &[Triangle],
         label: &'static str,
         quality: peers::embree::Quality,
+        split: bool,
     ) -> Self {
         Self {
             device,
@@ -484,6 +511,7 @@ impl<'d> EmbreePeer<'d> {
                 intersection_cost: 1.0,
             },
             label,
+            split,
             tris: tris.to_vec(),
             boxes: Vec::new(),
             cold_out: None,
@@ -502,7 +530,11 @@ impl Peer for EmbreePeer<'_> {
         let (tree, t) = timed(|| {
             let boxes: Vec<Aabb> = self.tris.iter().map(|t| Aabb::from_points(t)).collect();
             let mut tree = peers::embree::BuiltTree::new(self.device);
-            tree.build(&boxes, &self.settings);
+            if self.split {
+                tree.build_split(&boxes, &self.tris, &self.settings);
+            } else {
+                tree.build(&boxes, &self.settings);
+            }
             tree
         });
         self.cold_out = Some(tree);
@@ -512,8 +544,15 @@ impl Peer for EmbreePeer<'_> {
         let t = Instant::now();
         self.boxes.clear();
         self.boxes.extend(self.tris.iter().map(|t| Aabb::from_points(t)));
-        self.warm_out.build(&self.boxes, &self.settings);
+        if self.split {
+            self.warm_out.build_split(&self.boxes, &self.tris, &self.settings);
+        } else {
+            self.warm_out.build(&self.boxes, &self.settings);
+        }
         Some(t.elapsed())
+    }
+    fn split(&self) -> bool {
+        self.split
     }
     fn tree(&self) -> Bvh2 {
         use peers::embree::TreeNodeKind;
@@ -537,12 +576,13 @@ fn peers_for<'d>(s: &Scene, #[cfg(feature = "embree")] device: &'d peers::embree
     #[cfg(feature = "embree")]
     {
         use peers::embree::Quality;
-        for (label, q) in [
-            ("low", Quality::Low),
-            ("medium", Quality::Medium),
-            ("high", Quality::High),
+        for (label, q, split) in [
+            ("low", Quality::Low, false),
+            ("medium", Quality::Medium, false),
+            ("high", Quality::High, false),
+            ("high+splits", Quality::High, true),
         ] {
-            v.push(Box::new(EmbreePeer::new(device, &s.tris, label, q)));
+            v.push(Box::new(EmbreePeer::new(device, &s.tris, label, q, split)));
         }
     }
     v
@@ -570,6 +610,23 @@ fn bench_strahl(g: &mut BenchmarkGroup<'_, WallTime>, s: &Scene, fastest: &mut F
                         let (stats, t) = timed(|| builder.build_into(black_box(&s.tris[..]), &p, &mut bvh));
                         black_box(stats.expect("valid params"));
                         record(fastest, name, true, t)
+                    })
+                    .sum()
+            })
+        });
+    }
+}
+
+/// strahl's spatial-split builds as members of `g` (cold).
+fn bench_spatial(g: &mut BenchmarkGroup<'_, WallTime>, s: &Scene, fastest: &mut Fastest) {
+    for (name, p, sp) in spatial_builders() {
+        g.bench_function(name, |b| {
+            b.iter_custom(|iters| {
+                (0..iters)
+                    .map(|_| {
+                        let (r, t) = timed(|| Bvh2::build_spatial(black_box(&s.tris[..]), &p, &sp));
+                        drop(black_box(r.expect("valid params")));
+                        record(fastest, name, false, t)
                     })
                     .sum()
             })
@@ -645,11 +702,23 @@ fn best_time(first: Duration, fastest: Option<&Duration>, mut f: impl FnMut() ->
     best.as_secs_f64()
 }
 
-/// Validates `bvh` and measures its SAH cost and trace speed.
-fn measure(s: &Scene, name: String, family: &'static str, warm: Option<f64>, cold: f64, bvh: &Bvh2) -> Row {
-    let stats = bvh
-        .validate(&s.tris[..])
-        .unwrap_or_else(|e| panic!("{}: {name}: invalid tree: {e}", s.name));
+/// Validates `bvh` (`validate_split` where `split`: a spatial-split tree) and measures its SAH
+/// cost and trace speed.
+fn measure(
+    s: &Scene,
+    name: String,
+    family: &'static str,
+    warm: Option<f64>,
+    cold: f64,
+    bvh: &Bvh2,
+    split: bool,
+) -> Row {
+    let stats = if split {
+        bvh.validate_split(&s.tris[..])
+    } else {
+        bvh.validate(&s.tris[..])
+    }
+    .unwrap_or_else(|e| panic!("{}: {name}: invalid tree: {e}", s.name));
     // Deeper than the stack: the traversal would finish rays by linear scans (exact, but it would
     // time the fallback, not the tree).
     let (mrays, hits) = if stats.max_depth as usize <= STACK_SIZE + 1 {
@@ -684,7 +753,13 @@ fn summary(s: &Scene, peers: &mut [Box<dyn Peer + '_>], fastest: &Fastest) -> Ve
         let cold = best_time(cold(), get(name, false), cold);
         let mut warm = || timed(|| builder.build_into(&s.tris[..], &p, &mut bvh).expect("valid params")).1;
         let warm = best_time(warm(), get(name, true), warm);
-        rows.push(measure(s, name.into(), "strahl", Some(warm), cold, &bvh));
+        rows.push(measure(s, name.into(), "strahl", Some(warm), cold, &bvh, false));
+    }
+    for (name, p, sp) in spatial_builders() {
+        let build = || Bvh2::build_spatial(&s.tris[..], &p, &sp).expect("valid params");
+        let ((tree, _), first) = timed(build);
+        let cold = best_time(first, get(name, false), || timed(build).1);
+        rows.push(measure(s, name.into(), "strahl", None, cold, &tree, true));
     }
     for p in peers.iter_mut() {
         let name = p.name();
@@ -692,7 +767,15 @@ fn summary(s: &Scene, peers: &mut [Box<dyn Peer + '_>], fastest: &Fastest) -> Ve
             .warm()
             .map(|first| best_time(first, get(&name, true), || p.warm().expect("warm")));
         let cold = best_time(p.cold(), get(&name, false), || p.cold());
-        rows.push(measure(s, name.clone(), family_of(&name), warm, cold, &p.tree()));
+        rows.push(measure(
+            s,
+            name.clone(),
+            family_of(&name),
+            warm,
+            cold,
+            &p.tree(),
+            p.split(),
+        ));
     }
     let n = s.tris.len() as f64;
     let reference = rows[0].hits;
@@ -944,6 +1027,7 @@ fn build(c: &mut Criterion) {
         g.measurement_time(Duration::from_secs(if s.tris.len() > 100_000 { 4 } else { 2 }));
         let mut fastest = Fastest::new();
         bench_strahl(&mut g, &s, &mut fastest);
+        bench_spatial(&mut g, &s, &mut fastest);
         bench_peers(&mut g, &mut peers, &mut fastest);
         g.finish();
         let rows = summary(&s, &mut peers, &fastest);

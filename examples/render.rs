@@ -8,10 +8,12 @@
 //! cargo run --release --example render                 # the bundled bunny, a sphereflake, 36 bunny instances, a cut-out bunny
 //! cargo run --release --example render -- model.obj    # your OBJ file
 //! ```
-//! Options after the path: `--size WxH`, `--ao N` (AO rays per pixel, default 8), `--threads T`.
+//! Options after the path: `--size WxH`, `--ao N` (AO rays per pixel, default 8), `--threads T`,
+//! `--spatial` (build with spatial splits, `Bvh2::build_spatial`: slower to build, a better tree
+//! for scenes of long thin or large triangles; single-threaded).
 
 use std::time::Instant;
-use strahl::build::{BuildParams, Bvh2};
+use strahl::build::{BuildParams, Bvh2, SpatialSplits};
 use strahl::composite::{Assignment, Tile, render_tiles};
 use strahl::geometry::offset::{hit_point, offset_origin};
 use strahl::geometry::{Triangle, Triangles};
@@ -26,6 +28,8 @@ struct Options {
     height: u32,
     ao: u32,
     threads: usize,
+    /// Build with spatial splits.
+    spatial: bool,
 }
 
 struct Camera {
@@ -177,7 +181,12 @@ impl Tracer for Instanced {
 /// `None` (said why) where nothing can be rendered.
 fn build(tris: &[Triangle], o: &Options) -> Option<(Bvh2, Bvh8)> {
     let t0 = Instant::now();
-    let (bvh2, stats) = match Bvh2::build_par(tris, &BuildParams::default(), o.threads) {
+    let built = if o.spatial {
+        Bvh2::build_spatial(tris, &BuildParams::default(), &SpatialSplits::default())
+    } else {
+        Bvh2::build_par(tris, &BuildParams::default(), o.threads)
+    };
+    let (bvh2, stats) = match built {
         Ok(b) => b,
         Err(e) => {
             eprintln!("cannot build a BVH: {e}");
@@ -189,14 +198,26 @@ fn build(tris: &[Triangle], o: &Options) -> Option<(Bvh2, Bvh8)> {
     let bvh = Bvh8::from_bvh2_par(&bvh2, tris, o.threads).expect("a built tree collapses");
     let collapse_s = t0.elapsed().as_secs_f64();
     println!(
-        "build: binned SAH on up to {} threads {:.1} ms ({:.1} M tri/s, {} invalid triangles skipped), collapse to BVH8 {:.1} ms, SAH cost {:.1}, {} BVH8 nodes",
-        o.threads,
+        "build: {} {:.1} ms ({:.1} M tri/s, {} invalid triangles skipped), collapse to BVH8 {:.1} ms, SAH cost {:.1}, {} BVH8 nodes{}",
+        if o.spatial {
+            "spatial splits on 1 thread".to_string()
+        } else {
+            format!("binned SAH on up to {} threads", o.threads)
+        },
         build_s * 1e3,
         stats.primitives as f64 / build_s / 1e6,
         stats.invalid,
         collapse_s * 1e3,
         bvh2.sah_cost(1.0, 1.0),
-        bvh.nodes().len()
+        bvh.nodes().len(),
+        if o.spatial {
+            format!(
+                ", {:.2} references per triangle",
+                bvh2.prim_indices.len() as f64 / stats.primitives.max(1) as f64
+            )
+        } else {
+            String::new()
+        }
     );
     if bvh.is_empty() {
         println!("nothing to render");
@@ -394,6 +415,7 @@ fn main() {
         height: 768,
         ao: 8,
         threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        spatial: false,
     };
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -408,6 +430,7 @@ fn main() {
             }
             "--ao" => o.ao = args.next().and_then(|v| v.parse().ok()).unwrap_or(o.ao),
             "--threads" => o.threads = args.next().and_then(|v| v.parse().ok()).unwrap_or(o.threads).max(1),
+            "--spatial" => o.spatial = true,
             _ => path = Some(a),
         }
     }

@@ -539,8 +539,8 @@ fn every_params_on_adversarial_scenes() {
 
 /// Spatial splits ([`Bvh2::build_spatial`]) on every small adversarial scene, the large ones at
 /// 3,000 triangles and a deep geometric series, with the default knobs, aggressive ones (no
-/// overlap threshold, 16 references per triangle, 4 bins, every node searched, leaves of 1) and
-/// the depth bound 34: valid by `validate_split`, within the depth, leaf and reference bounds,
+/// overlap threshold, 16 references per triangle, 4 bins, every node searched, leaves of 1), the
+/// refinement passes after them and the depth bound 34: valid by `validate_split`, within the depth, leaf and reference bounds,
 /// the plain build's primitive and invalid counts, and brute force's closest hits through the
 /// tree and its collapses.
 #[test]
@@ -553,6 +553,15 @@ fn spatial_splits_on_adversarial_scenes() {
     };
     let knobs = [
         ("default", BuildParams::default(), SpatialSplits::default()),
+        ("high (rotations after)", BuildParams::high(), aggressive),
+        (
+            "reinsertion after",
+            BuildParams {
+                refine: Refine::Reinsertion(ReinsertParams::new()),
+                ..BuildParams::default()
+            },
+            SpatialSplits::default(),
+        ),
         (
             "aggressive",
             BuildParams {

@@ -311,3 +311,37 @@ fn bad_input_and_parameters() {
     moved.nodes[leaf].set_aabb(&far);
     assert!(moved.validate_split(&soup[..]).is_err());
 }
+
+/// The refinement passes work on node boxes alone, so they take spatial-split trees as they are:
+/// still valid, never a higher SAH cost, still brute force's hits.
+#[test]
+fn refinement_after_spatial_build() {
+    let tris = scene::thin_soup(3_000, 6);
+    let rays = rays(&tris, 9);
+    let (base, _) = Bvh2::build_spatial(&tris[..], &BuildParams::default(), &EAGER).unwrap();
+    let before = base.sah_cost(1.0, 1.0);
+    type Pass = fn(&mut Bvh2) -> bool;
+    let passes: [(&str, Pass); 3] = [
+        ("rotations", |b| b.optimize_rotations(2, 64).is_ok()),
+        ("reinsertion", |b| {
+            b.optimize_reinsertion(&strahl::build::ReinsertParams::new(), 64)
+                .is_ok()
+        }),
+        ("treelets", |b| {
+            b.optimize_treelets(&strahl::build::TreeletParams::new(), 64).is_ok()
+        }),
+    ];
+    for (name, pass) in passes {
+        let mut b = base.clone();
+        assert!(pass(&mut b), "{name}");
+        b.validate_split(&tris[..]).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(b.prim_indices.len(), base.prim_indices.len(), "{name}");
+        let after = b.sah_cost(1.0, 1.0);
+        assert!(after <= before * (1.0 + 1e-5), "{name}: {before} -> {after}");
+        let b8 = Bvh8::from_bvh2(&b, &tris[..]).unwrap();
+        for ray in &rays {
+            let want = intersect_brute_force::<Watertight, _>(&tris[..], ray);
+            common::same(b8.intersect::<Watertight>(ray), want, &tris, ray, name);
+        }
+    }
+}

@@ -803,6 +803,52 @@ extern "C" fn create_id_leaf(
     }
 }
 
+type SplitPrimitive = extern "C" fn(*const RTCBuildPrimitive, c_uint, f32, *mut RTCBounds, *mut RTCBounds, *mut c_void);
+
+/// Embree's `splitPrimitive` callback: the reference's triangle (`user` points to the `&[[Vec3;
+/// 3]]` of [`BuiltTree::build_split`]) clipped at `position` on `dimension`, within the
+/// reference's box.
+extern "C" fn split_triangle(
+    prim: *const RTCBuildPrimitive,
+    dimension: c_uint,
+    position: f32,
+    left: *mut RTCBounds,
+    right: *mut RTCBounds,
+    user: *mut c_void,
+) {
+    // SAFETY: Embree passes a valid primitive and two bounds to write; `user` is the slice
+    // reference `build_split` set up, alive for the build.
+    unsafe {
+        let tris: &[[Vec3; 3]] = *(user as *const &[[Vec3; 3]]);
+        let p = &*prim;
+        let within = Aabb::new(Vec3::from_array(p.lower), Vec3::from_array(p.upper));
+        let (l, r) = match tris.get(p.prim_id as usize) {
+            Some(t) => strahl::build::clip_triangle(t, &within, dimension as usize, position),
+            None => (Aabb::EMPTY, Aabb::EMPTY),
+        };
+        // Embree counts the reference on both sides: a side without a part of the triangle gets
+        // the reference's box cut to that side (never empty; tested for nothing, conservative).
+        let d = (dimension as usize).min(2);
+        let side = |b: Aabb, left: bool| {
+            if !b.is_empty() {
+                return b;
+            }
+            let mut c = within;
+            if left {
+                c.max[d] = c.max[d].min(position).max(c.min[d]);
+            } else {
+                c.min[d] = c.min[d].max(position).min(c.max[d]);
+            }
+            c
+        };
+        let (l, r) = (side(l, true), side(r, false));
+        for (out, b) in [(left, l), (right, r)] {
+            (*out).lower = b.min.to_array();
+            (*out).upper = b.max.to_array();
+        }
+    }
+}
+
 fn to_aabb(b: &RTCBounds) -> Aabb {
     Aabb::new(Vec3::from_array(b.lower), Vec3::from_array(b.upper))
 }
@@ -811,8 +857,9 @@ fn to_aabb(b: &RTCBounds) -> Aabb {
 #[derive(Clone, Copy, Debug)]
 pub struct TreeSettings {
     /// Build quality. `rtcBuildBVH` runs its Morton builder for `Low` and its binned SAH builder
-    /// for `Medium`; `High` means spatial splits, which need a split callback (none is given, as
-    /// a split primitive would sit in several leaves), so `High` runs the binned SAH builder too.
+    /// for `Medium`; `High` means spatial splits, which need a split callback (given only by
+    /// [`BuiltTree::build_split`]), so in [`BuiltTree::build`] `High` runs the binned SAH builder
+    /// too.
     pub quality: Quality,
     /// Largest leaf (at most 32, `RTC_BUILD_MAX_PRIMITIVES_PER_LEAF`).
     pub max_leaf: u32,
@@ -901,6 +948,59 @@ impl<'d> BuiltTree<'d> {
         };
         // SAFETY: `prims` lives (unmoved) for the whole call; the callbacks only write memory
         // from Embree's allocator, which the BVH object owns until the next build or release.
+        self.root = if self.prims.is_empty() {
+            null_mut()
+        } else {
+            unsafe { rtcBuildBVH(&args) }
+        };
+    }
+
+    /// [`build`](Self::build) with spatial splits (`s.quality` should be `High`, where
+    /// `rtcBuildBVH` runs its spatial-split builder): `boxes` are `tris`' boxes, and Embree's
+    /// `splitPrimitive` callback clips `tris[prim_id]` with `strahl::build::clip_triangle`, with
+    /// room for one split reference per primitive (up to 2 references per triangle). Leaves may
+    /// then share a triangle.
+    pub fn build_split(&mut self, boxes: &[Aabb], tris: &[[Vec3; 3]], s: &TreeSettings) {
+        self.prims.clear();
+        self.prims.reserve(2 * boxes.len());
+        let mut bounds = Aabb::EMPTY;
+        self.prims.extend(boxes.iter().enumerate().map(|(i, b)| {
+            bounds = bounds.union(b);
+            RTCBuildPrimitive {
+                lower: b.min.to_array(),
+                geom_id: 0,
+                upper: b.max.to_array(),
+                prim_id: i as u32,
+            }
+        }));
+        self.bounds = bounds;
+        let mut user = tris;
+        let args = RTCBuildArguments {
+            byte_size: std::mem::size_of::<RTCBuildArguments>(),
+            build_quality: s.quality as c_uint,
+            build_flags: 0,
+            max_branching_factor: 2,
+            max_depth: 1024,
+            sah_block_size: 1,
+            min_leaf_size: 1,
+            max_leaf_size: s.max_leaf.clamp(1, 32),
+            traversal_cost: s.traversal_cost,
+            intersection_cost: s.intersection_cost,
+            bvh: self.bvh,
+            primitives: self.prims.as_mut_ptr(),
+            primitive_count: self.prims.len(),
+            primitive_array_capacity: self.prims.capacity(),
+            create_node: Some(create_node),
+            set_node_children: Some(set_children),
+            set_node_bounds: Some(set_bounds),
+            create_leaf: Some(create_id_leaf),
+            split_primitive: split_triangle as SplitPrimitive as *const c_void,
+            build_progress: null(),
+            user_ptr: (&mut user as *mut &[[Vec3; 3]]).cast(),
+        };
+        // SAFETY: as in `build`; Embree writes split references into the array's spare capacity
+        // (allocated, never read through the `Vec`), and `user` (read by `split_triangle`) lives
+        // for the whole call.
         self.root = if self.prims.is_empty() {
             null_mut()
         } else {

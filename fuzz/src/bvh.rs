@@ -1,5 +1,6 @@
-//! The `bvh` target: every builder (and the treelet pass), the BVH4/BVH8 collapse, single-ray
-//! traversal of all three trees and 8-ray packets, and the BVH8 refit, against brute force.
+//! The `bvh` target: every builder (and the treelet pass, and spatial splits), the BVH4/BVH8
+//! collapse, single-ray traversal of all three trees and 8-ray packets, and the BVH8 refit,
+//! against brute force.
 //!
 //! Input layout (every byte string decodes; see [`decode`](crate::decode) for values):
 //!
@@ -17,7 +18,9 @@
 //! only where it hits at an equal `t`, `+0` and `-0` included); any-hit answers agree.
 
 use crate::decode::{Input, Mode};
-use strahl::build::{BuildParams, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy, TreeletParams};
+use strahl::build::{
+    BuildParams, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, SpatialSplits, Strategy, TreeletParams,
+};
 use strahl::geometry::{Hit, Triangle};
 use strahl::intersect::{PreparedRay, watertight};
 use strahl::layout::{Bvh4, Bvh8};
@@ -349,6 +352,53 @@ pub fn check_bvh(case: &BvhCase) {
         if params == builders()[0] {
             check_refit(case, &b2, &b8);
             check_tlas(case, &kept, &b8, scene_tame);
+            check_spatial(case, &kept, scene_tame);
+        }
+    }
+}
+
+/// Spatial splits (`Bvh2::build_spatial`, eager knobs: every node searched, no overlap threshold,
+/// up to 4 references per triangle, 4 and 16 planes): the build succeeds, `validate_split`
+/// passes with the plain build's primitive count (`kept`: the triangles it holds), the reference
+/// budget holds; on tame inputs BVH2 and BVH8 give brute force's closest and any hits.
+fn check_spatial(case: &BvhCase, kept: &[Triangle], scene_tame: bool) {
+    let tris = &case.tris[..];
+    for bins in [4, 16] {
+        let sp = SpatialSplits {
+            alpha: 0.0,
+            max_references: 4.0,
+            bins,
+            min_node_size: 2,
+        };
+        let params = BuildParams {
+            min_leaf_size: 1,
+            max_leaf_size: 2,
+            ..BuildParams::default()
+        };
+        let (b2, stats) = Bvh2::build_spatial(tris, &params, &sp).expect("valid knobs");
+        let report = b2
+            .validate_split(tris)
+            .unwrap_or_else(|e| panic!("spatial {bins}: validate_split: {e:?}"));
+        let held = kept.iter().filter(|t| !t[0].is_nan()).count();
+        assert_eq!((report.primitives as usize, stats.primitives as usize), (held, held), "spatial {bins}");
+        assert!(b2.prim_indices.len() <= 4 * held, "spatial {bins}: {} references", b2.prim_indices.len());
+        let b8 = Bvh8::from_bvh2(&b2, tris).expect("a valid tree collapses");
+        let tame = |v: Vec3| {
+            v.to_array()
+                .iter()
+                .all(|x| *x == 0.0 || (TAME_MIN..=TAME).contains(&x.abs()))
+        };
+        for (i, ray) in case.rays.iter().enumerate() {
+            let _ = (b8.intersect::<Watertight>(ray), b8.occluded::<Watertight>(ray));
+            if !(scene_tame && (case.mode == Mode::Grid || (tame(ray.origin) && tame(ray.direction)))) {
+                continue;
+            }
+            let what = format!("spatial {bins} ray {i}");
+            let want = strahl::traverse::intersect_brute_force::<Watertight, _>(kept, ray);
+            agrees(kept, ray, b2.intersect::<Watertight, _>(tris, ray), want, &format!("{what} bvh2"));
+            agrees(kept, ray, b8.intersect::<Watertight>(ray), want, &format!("{what} bvh8"));
+            let occ = strahl::traverse::occluded_brute_force::<Watertight, _>(kept, ray);
+            assert_eq!(b8.occluded::<Watertight>(ray), occ, "{what} bvh8 occluded");
         }
     }
 }

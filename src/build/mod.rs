@@ -1,7 +1,8 @@
 //! BVH2 construction: [`Bvh2`] and its builders (object median, full-sweep SAH, binned SAH,
 //! LBVH, HLBVH, PLOC), treelet restructuring ([`Bvh2::optimize_treelets`]), tree rotations
-//! ([`Bvh2::optimize_rotations`]), reinsertion ([`Bvh2::optimize_reinsertion`]), [`Bvh2::validate`],
-//! [`Bvh2::refit`] and [`Bvh2::sah_cost`].
+//! ([`Bvh2::optimize_rotations`]), reinsertion ([`Bvh2::optimize_reinsertion`]), spatial splits
+//! ([`Bvh2::build_spatial`], triangles only), [`Bvh2::validate`], [`Bvh2::refit`] and
+//! [`Bvh2::sah_cost`].
 //!
 //! Pipeline stage: after [`geometry`](crate::geometry), before `layout` (wide nodes) and
 //! [`traverse`](crate::traverse). Input: anything that implements [`Primitives`] (every
@@ -22,6 +23,7 @@
 //! | [`Hlbvh`](Strategy::Hlbvh) | Pantaleoni and Luebke 2010; Garanzha et al. 2011 | LBVH bottoms in clusters of up to [`cluster_size`](BuildParams::cluster_size) codes (SAH leaf collapse), binned SAH over the clusters' boxes on top | O(n) after a radix sort, plus binned SAH over the clusters |
 //! | [`HlbvhSah`](Strategy::HlbvhSah) | HLBVH clusters with Bonsai-style SAH mini-trees, pruned on multi-scale scenes (Ganestam et al. 2015) | the binned builder within each cluster, in cache | O(n) sort, plus binned SAH over the clusters and within them |
 //! | [`Ploc`](Strategy::Ploc) | Meister and Bittner 2018 (search radius 1) | Morton-sorted clusters merged bottom-up with the neighbour of smaller union area, where the two prefer each other; one-primitive leaves | O(n log n) after a radix sort; O(n) rounds on even scenes |
+//! | [`Bvh2::build_spatial`] ([`SpatialSplits`]) | Stich, Friedrich and Dietrich 2009 (SBVH) | binned object split; where its children overlap, also planes through the node's box with every straddling triangle clipped into the bins it spans ("chopped binning"); the cheaper by the SAH, straddlers unsplit where a whole one is cheaper; triangles may sit in several leaves | O(n log n), about 10x binned SAH |
 //! | [`Refine::Rotations`] (after any of them) | Kensler 2008 | the best of six child/grandchild swaps where it shrinks the two children's boxes | O(n) per round |
 //! | [`Refine::Reinsertion`] (after any of them) | Bittner, Hapala and Havran 2013 (one subtree per move, as Meister and Bittner 2018) | take a subtree out, put it back where the SAH cost grows least (branch and bound over the tree) | about `n log n` per round over every node |
 //! | [`Refine::Treelets`] (after any of them) | Karras and Aila 2013 (TRBVH) | best topology of a 3 ..= 8-leaf treelet by dynamic programming over its leaf subsets, `~3^k / 2` steps | O(n) per round |
@@ -327,7 +329,7 @@ pub(crate) use prims::usable_box;
 pub use prims::{MAX_PRIMITIVES, Primitives};
 pub use reinsert::{ReinsertParams, ReinsertStats};
 pub use rotate::RotationStats;
-pub use spatial::SpatialSplits;
+pub use spatial::{SpatialSplits, clip_triangle};
 pub use treelet::TreeletStats;
 pub use validate::{BvhStats, ValidateError};
 
