@@ -45,7 +45,8 @@
 //!   with a split callback, so without one Embree runs the binned SAH builder for it as well;
 //!   `high+splits` gives one (`splitPrimitive`, clipping with `strahl::build::clip_triangle`, room
 //!   for up to 2 references per triangle): Embree's spatial-split builder, the peer of strahl's
-//!   `spatial` members (both checked with `Bvh2::validate_split`).
+//!   `spatial` members (both checked with `Bvh2::validate_split`; where Embree's leaves hold both
+//!   parts of a triangle, it is kept once in the converted tree).
 //!
 //! Every peer's build time includes computing the triangles' boxes, as strahl's does. Each peer's
 //! tree is then converted (untimed) to a strahl `Bvh2`, depth first with siblings adjacent and the
@@ -557,9 +558,17 @@ impl Peer for EmbreePeer<'_> {
     fn tree(&self) -> Bvh2 {
         use peers::embree::TreeNodeKind;
         let tree = self.cold_out.as_ref().unwrap_or(&self.warm_out);
+        let split = self.split;
         convert(tree.root(), |n, prims| match tree.node(n) {
             TreeNodeKind::Leaf(ids) => {
-                prims.extend_from_slice(ids);
+                let start = prims.len();
+                for &id in ids {
+                    // Embree's spatial splits may leave both parts of a triangle in one leaf:
+                    // kept once (redundant for traversal; `validate_split` rejects repeats).
+                    if !(split && prims[start..].contains(&id)) {
+                        prims.push(id);
+                    }
+                }
                 None
             }
             TreeNodeKind::Inner(children) => Some(children),

@@ -14,7 +14,9 @@
 //! computation included); `embree_*_reordered` runs Embree over the rays in that same order.
 //! `bvh8_fast` is BVH8 with the fast slab test (`traverse::Fast<Moller>`, Embree's default form;
 //! not conservative). `embree_robust_*` is Embree's scene built with `RTC_SCENE_FLAG_ROBUST` (robust traversal, as
-//! strahl's slab test always is; Embree's default trades that for speed).
+//! strahl's slab test always is; Embree's default trades that for speed). `bvh8_spatial` is BVH8
+//! over the spatial-split tree (`Bvh2::build_spatial`, default knobs); its peer is
+//! `embree_high_*`, Embree's scene at `RTC_BUILD_QUALITY_HIGH` (its spatial-split build).
 //!
 //! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree).
 
@@ -28,7 +30,7 @@ use common::{BvhCrateTri, bounds, diffuse_rays, primary_rays, shadow_rays};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::time::Instant;
-use strahl::build::{BuildParams, Bvh2};
+use strahl::build::{BuildParams, Bvh2, SpatialSplits};
 use strahl::geometry::{Hit, Triangle};
 use strahl::intersect::{PreparedRay, moller};
 use strahl::layout::{Bvh4, Bvh8};
@@ -44,6 +46,8 @@ struct Contenders {
     bvh2: Bvh2,
     bvh4: Bvh4,
     bvh8: Bvh8,
+    /// BVH8 from the spatial-split build (`Bvh2::build_spatial`, default knobs).
+    bvh8_spatial: Bvh8,
     peer_bvh: bvh::bvh::Bvh<f32, 3>,
     peer_bvh_shapes: Vec<BvhCrateTri>,
     obvhs: obvhs::cwbvh::CwBvh,
@@ -55,6 +59,10 @@ fn build(tris: Vec<Triangle>) -> Contenders {
     let bvh4 = Bvh4::from_bvh2(&bvh2, &tris[..]).expect("collapse");
     let bvh8 = Bvh8::from_bvh2(&bvh2, &tris[..]).expect("collapse");
     let strahl_s = t0.elapsed().as_secs_f64();
+    let t0 = Instant::now();
+    let (sbvh, _) = Bvh2::build_spatial(&tris[..], &BuildParams::default(), &SpatialSplits::default()).expect("build");
+    let bvh8_spatial = Bvh8::from_bvh2(&sbvh, &tris[..]).expect("collapse");
+    let spatial_s = t0.elapsed().as_secs_f64();
     let p = |v: Vec3| nalgebra::Point3::new(v.x, v.y, v.z);
     let mut peer_bvh_shapes: Vec<BvhCrateTri> = tris
         .iter()
@@ -84,9 +92,11 @@ fn build(tris: Vec<Triangle>) -> Contenders {
     );
     let obvhs_s = t0.elapsed().as_secs_f64();
     println!(
-        "{} triangles; build: strahl binned SAH + collapse {:.0} ms, bvh crate {:.0} ms, obvhs medium {:.0} ms",
+        "{} triangles; build: strahl binned SAH + collapse {:.0} ms, spatial splits + collapse {:.0} ms ({:.2} references per triangle), bvh crate {:.0} ms, obvhs medium {:.0} ms",
         tris.len(),
         strahl_s * 1e3,
+        spatial_s * 1e3,
+        sbvh.prim_indices.len() as f64 / tris.len() as f64,
         bvh_s * 1e3,
         obvhs_s * 1e3
     );
@@ -95,6 +105,7 @@ fn build(tris: Vec<Triangle>) -> Contenders {
         bvh2,
         bvh4,
         bvh8,
+        bvh8_spatial,
         peer_bvh,
         peer_bvh_shapes,
         obvhs,
@@ -250,6 +261,16 @@ fn run_bvh8_occluded_incoherent(c: &Contenders, rays: &[Ray]) -> usize {
     out.iter().filter(|&&o| o).count()
 }
 
+fn run_bvh8_spatial(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter()
+        .filter(|r| c.bvh8_spatial.intersect::<Moller>(r).is_some())
+        .count()
+}
+
+fn run_bvh8_spatial_occluded(c: &Contenders, rays: &[Ray]) -> usize {
+    rays.iter().filter(|r| c.bvh8_spatial.occluded::<Moller>(r)).count()
+}
+
 fn run_bvh8_fast(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter()
         .filter(|r| c.bvh8.intersect::<Fast<Moller>>(r).is_some())
@@ -320,6 +341,9 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
     let device = peers::embree::Device::single_threaded();
     #[cfg(feature = "embree")]
     let embree = peers::embree::Scene::new(&device, &c.tris, peers::embree::Quality::Medium);
+    // Embree's high-quality build: spatial splits.
+    #[cfg(feature = "embree")]
+    let embree_high = peers::embree::Scene::new(&device, &c.tris, peers::embree::Quality::High);
     #[cfg(feature = "embree")]
     let embree_robust = peers::embree::Scene::with_flags(&device, &c.tris, peers::embree::Quality::Medium, true);
     // The same scene with a hit filter that keeps every hit (`bvh8_filter_all`'s, through Embree's
@@ -349,6 +373,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh2_scalar", run_bvh2_occluded),
                 ("bvh4", run_bvh4_occluded),
                 ("bvh8", run_bvh8_occluded),
+                ("bvh8_spatial", run_bvh8_spatial_occluded),
                 ("bvh8_fast", run_bvh8_occluded_fast),
                 ("bvh8_filter_all", run_bvh8_occluded_filter_all),
                 ("bvh8_filter_odd", run_bvh8_occluded_filter_odd),
@@ -363,6 +388,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh2_scalar", run_bvh2),
                 ("bvh4", run_bvh4),
                 ("bvh8", run_bvh8),
+                ("bvh8_spatial", run_bvh8_spatial),
                 ("bvh8_fast", run_bvh8_fast),
                 ("bvh8_filter_all", run_bvh8_filter_all),
                 ("bvh8_filter_odd", run_bvh8_filter_odd),
@@ -454,6 +480,16 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 got.abs_diff(want) <= rays.len() / 1000 + 1,
                 "{name}/{kind}: embree with odd primitives rejected hits {got}, bvh8 {want}"
             );
+            let eh = &embree_high;
+            let got = if *any_hit {
+                rays.iter().filter(|r| eh.occluded1(r)).count()
+            } else {
+                rays.iter().filter(|r| eh.intersect1(r).is_some()).count()
+            };
+            assert!(
+                got.abs_diff(reference) <= rays.len() / 1000 + 1,
+                "{name}/{kind}: embree (high) hits {got}, bvh2 {reference}"
+            );
             let er = &embree_robust;
             let got = if *any_hit {
                 rays.iter().filter(|r| er.occluded1(r)).count()
@@ -493,6 +529,9 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 g.bench_function("embree_filter_odd_rtcOccluded1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| eo.occluded1(r)).count())
                 });
+                g.bench_function("embree_high_rtcOccluded1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| eh.occluded1(r)).count())
+                });
                 g.bench_function("embree_robust_rtcOccluded1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| er.occluded1(r)).count())
                 });
@@ -508,6 +547,9 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 });
                 g.bench_function("embree_filter_odd_rtcIntersect1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| eo.intersect1(r).is_some()).count())
+                });
+                g.bench_function("embree_high_rtcIntersect1", |bch| {
+                    bch.iter(|| black_box(rays).iter().filter(|r| eh.intersect1(r).is_some()).count())
                 });
                 g.bench_function("embree_robust_rtcIntersect1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| er.intersect1(r).is_some()).count())
