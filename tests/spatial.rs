@@ -345,3 +345,39 @@ fn refinement_after_spatial_build() {
         }
     }
 }
+
+/// Two valid triangles far out (the root's area overflows `f32`) do not turn spatial splits off;
+/// `clip_triangle` gives both sides the whole box where a crossing overflows or the plane is NaN.
+#[test]
+fn far_triangles_and_overflowing_clips() {
+    let mut soup = scene::thin_soup(5_000, 1);
+    let n = soup.len();
+    let (near, _) = Bvh2::build_spatial(&soup[..], &BuildParams::default(), &EAGER).unwrap();
+    soup.push([
+        Vec3::splat(1e38),
+        Vec3::splat(1e38) + Vec3::X,
+        Vec3::splat(1e38) + Vec3::Y,
+    ]);
+    soup.push([
+        Vec3::splat(-1e38),
+        Vec3::splat(-1e38) + Vec3::X,
+        Vec3::splat(-1e38) + Vec3::Y,
+    ]);
+    let (far, _) = Bvh2::build_spatial(&soup[..], &BuildParams::default(), &EAGER).unwrap();
+    assert!(
+        near.prim_indices.len() > n && far.prim_indices.len() > n + 2,
+        "{}",
+        far.prim_indices.len()
+    );
+    far.validate_split(&soup[..]).unwrap();
+    let t = [
+        Vec3::new(0.0, -3e38, 0.0),
+        Vec3::new(4.0, 3e38, 0.0),
+        Vec3::new(0.0, 3e38, 1.0),
+    ];
+    let within = Aabb::from_points(&t);
+    for pos in [1.0, f32::NAN] {
+        let (l, r) = strahl::build::clip_triangle(&t, &within, 0, pos);
+        assert!(l == within && r == within, "{pos}: {l:?} {r:?}");
+    }
+}

@@ -251,11 +251,20 @@ pub(crate) fn clip(t: &[Vec3A; 3], within: &Bx, axis: usize, pos: f32) -> (Bx, B
             let mut pad = v0.abs().max(v1.abs()) * (8.0 * f32::EPSILON) + Vec3A::splat(f32::MIN_POSITIVE);
             x[axis] = pos;
             pad[axis] = 0.0;
+            if !(x.is_finite() && pad.is_finite()) {
+                // Overflow (inf - inf, inf * 0): no bound; see below.
+                return (*within, *within);
+            }
             for side in [&mut l, &mut r] {
                 side.grow(x - pad);
                 side.grow(x + pad);
             }
         }
+    }
+    // A NaN plane: both sides get the whole box. (So does a crossing point that overflowed, an
+    // edge longer than `f32::MAX`, which the builder never sees: such triangles are left out.)
+    if pos.is_nan() {
+        return (*within, *within);
     }
     (intersect(&l, within), intersect(&r, within))
 }
@@ -341,7 +350,11 @@ impl Bvh2 {
         // Within `MAX_PRIMITIVES` (so every slot fits a `u32`).
         let budget = ((n as f64 * f64::from(splits.max_references)) as usize).min(MAX_PRIMITIVES);
         let mut live = n;
-        let root_area = area(&root);
+        let root_area = {
+            let d = (root.max.to_array(), root.min.to_array());
+            let e: [f64; 3] = core::array::from_fn(|a| f64::from(d.0[a]) - f64::from(d.1[a]));
+            e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+        };
         let mut s = Scratch::default();
         out.nodes.push(Node::leaf(&root.to_aabb(), 0, 1));
         out.prim_indices.reserve(n);
@@ -368,7 +381,11 @@ impl Bvh2 {
                 let try_spatial = live < budget
                     && count >= splits.min_node_size as usize
                     && match best {
-                        Some((_, _, _, ref lb, ref rb)) => area(&intersect(lb, rb)) > splits.alpha * root_area,
+                        // In f64: a root area that overflows `f32` must not turn the test off.
+                        Some((_, _, _, ref lb, ref rb)) => {
+                            splits.alpha == 0.0
+                                || f64::from(area(&intersect(lb, rb))) > f64::from(splits.alpha) * root_area
+                        }
                         None => true,
                     };
                 object = best.map(|(axis, plane, cost, _, _)| Split::Object { axis, plane, cost });
@@ -593,48 +610,66 @@ fn best_spatial<P: Triangles + ?Sized>(
 ) -> Option<Split> {
     let n = refs.len() as u32;
     let mut best: Option<Split> = None;
-    for axis in 0..3 {
+    // Per axis: origin, bin width, its inverse; `None` where the box is too thin to cut.
+    let grid: [Option<(f32, f32, f32)>; 3] = core::array::from_fn(|axis| {
         let (lo, hi) = (bounds.min[axis], bounds.max[axis]);
         let width = (hi - lo) / bins as f32;
-        if !(width > 0.0 && width.is_finite()) || lo + width == lo {
-            continue;
-        }
-        let inv = 1.0 / width;
-        let bin_of = |x: f32| (((x - lo) * inv).max(0.0) as usize).min(bins - 1);
-        s.sbins.clear();
-        s.sbins.resize(bins, (Bx::EMPTY, 0, 0));
-        for r in refs {
+        (width > 0.0 && width.is_finite() && lo + width != lo).then(|| (lo, width, 1.0 / width))
+    });
+    if grid.iter().all(Option::is_none) {
+        return None;
+    }
+    // All three axes in one pass (bins `axis * bins ..`), each triangle read at most once.
+    s.sbins.clear();
+    s.sbins.resize(3 * bins, (Bx::EMPTY, 0, 0));
+    for r in refs {
+        let mut tri: Option<[Vec3A; 3]> = None;
+        for (axis, g) in grid.iter().enumerate() {
+            let Some((lo, width, inv)) = *g else { continue };
+            let bin_of = |x: f32| (((x - lo) * inv).max(0.0) as usize).min(bins - 1);
             let (first, last) = (bin_of(r.b.min[axis]), bin_of(r.b.max[axis]));
-            s.sbins[first].1 += 1;
-            s.sbins[last].2 += 1;
+            let sb = &mut s.sbins[axis * bins..(axis + 1) * bins];
+            sb[first].1 += 1;
+            sb[last].2 += 1;
             if first == last {
-                s.sbins[first].0.grow_aabb(&r.b);
+                sb[first].0.grow_aabb(&r.b);
                 continue;
             }
-            let Some(t) = tris.triangle(r.prim as usize).map(|t| t.map(Vec3A::from)) else {
+            if tri.is_none() {
+                tri = tris.triangle(r.prim as usize).map(|t| t.map(Vec3A::from));
+            }
+            let Some(t) = tri else {
+                // Not for a reference the build made; its whole box in every bin it spans.
+                for b in &mut sb[first..=last] {
+                    b.0.grow_aabb(&r.b);
+                }
                 continue;
             };
             let mut rest = r.b;
-            for k in first..last {
-                let (l, rr) = clip(&t, &rest, axis, lo + (k + 1) as f32 * width);
-                s.sbins[k].0.grow_aabb(&l);
+            for (k, b) in sb[first..last].iter_mut().enumerate() {
+                let (l, rr) = clip(&t, &rest, axis, lo + (first + k + 1) as f32 * width);
+                b.0.grow_aabb(&l);
                 rest = rr;
             }
-            s.sbins[last].0.grow_aabb(&rest);
+            sb[last].0.grow_aabb(&rest);
         }
+    }
+    for (axis, g) in grid.iter().enumerate() {
+        let Some((lo, width, _)) = *g else { continue };
+        let sb = &s.sbins[axis * bins..(axis + 1) * bins];
         // Left of plane k: references entering at or before bin k; right: leaving after it.
         s.rbox.clear();
         s.rbox.resize(bins, Bx::EMPTY);
         let mut acc = Bx::EMPTY;
         for k in (0..bins).rev() {
-            acc = acc.union(&s.sbins[k].0);
+            acc = acc.union(&sb[k].0);
             s.rbox[k] = acc;
         }
         let (mut lb, mut nl, mut nr) = (Bx::EMPTY, 0u32, n);
-        for k in 0..bins - 1 {
-            lb = lb.union(&s.sbins[k].0);
-            nl += s.sbins[k].1;
-            nr -= s.sbins[k].2;
+        for (k, bin) in sb[..bins - 1].iter().enumerate() {
+            lb = lb.union(&bin.0);
+            nl += bin.1;
+            nr -= bin.2;
             let rb = s.rbox[k + 1];
             if nl == 0 || nr == 0 || nl >= n && nr >= n || (nl + nr - n) as usize > spare {
                 continue;

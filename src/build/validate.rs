@@ -277,7 +277,7 @@ impl Bvh2 {
     /// box finite, non-empty and containing its children's boxes and its primitives' boxes, every
     /// slot in exactly one leaf, every valid primitive referenced exactly once and no invalid one
     /// referenced. Returns the tree's statistics, or the first violation found. O(nodes + prims),
-    /// iterative; allocates three bitmaps.
+    /// iterative; allocates a node bitmap, a slot bitmap and a word per primitive.
     ///
     /// Boxes are compared exactly: the builders and [`refit`](Self::refit) compute them with
     /// `min`/`max` only, so no tolerance is needed.
@@ -300,6 +300,9 @@ impl Bvh2 {
     /// (never twice by one leaf), each referencing leaf's box must touch the triangle's box
     /// (intersect it: [`ValidateError::PrimNotContained`] otherwise), and each of its vertices
     /// must lie in the box of some leaf that references it ([`ValidateError::PrimNotCovered`]).
+    /// Vertices only: a tree whose leaves miss the inside of a triangle (but not its corners)
+    /// passes; that every point is covered is what the builder's clipping and its tests against
+    /// brute force establish.
     /// [`BvhStats::primitives`] counts distinct triangles; [`BvhStats::mean_leaf_size`]
     /// references. A tree that passes [`validate`](Self::validate) passes this too.
     ///
