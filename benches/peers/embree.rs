@@ -911,48 +911,7 @@ impl<'d> BuiltTree<'d> {
 
     /// (Re)builds the tree over `boxes` (all valid) with `s`; the previous tree is gone.
     pub fn build(&mut self, boxes: &[Aabb], s: &TreeSettings) {
-        self.prims.clear();
-        let mut bounds = Aabb::EMPTY;
-        self.prims.extend(boxes.iter().enumerate().map(|(i, b)| {
-            bounds = bounds.union(b);
-            RTCBuildPrimitive {
-                lower: b.min.to_array(),
-                geom_id: 0,
-                upper: b.max.to_array(),
-                prim_id: i as u32,
-            }
-        }));
-        self.bounds = bounds;
-        let args = RTCBuildArguments {
-            byte_size: std::mem::size_of::<RTCBuildArguments>(),
-            build_quality: s.quality as c_uint,
-            build_flags: 0,
-            max_branching_factor: 2,
-            max_depth: 1024,
-            sah_block_size: 1,
-            min_leaf_size: 1,
-            max_leaf_size: s.max_leaf.clamp(1, 32),
-            traversal_cost: s.traversal_cost,
-            intersection_cost: s.intersection_cost,
-            bvh: self.bvh,
-            primitives: self.prims.as_mut_ptr(),
-            primitive_count: self.prims.len(),
-            primitive_array_capacity: self.prims.len(),
-            create_node: Some(create_node),
-            set_node_children: Some(set_children),
-            set_node_bounds: Some(set_bounds),
-            create_leaf: Some(create_id_leaf),
-            split_primitive: null(),
-            build_progress: null(),
-            user_ptr: null_mut(),
-        };
-        // SAFETY: `prims` lives (unmoved) for the whole call; the callbacks only write memory
-        // from Embree's allocator, which the BVH object owns until the next build or release.
-        self.root = if self.prims.is_empty() {
-            null_mut()
-        } else {
-            unsafe { rtcBuildBVH(&args) }
-        };
+        self.build_with(boxes, None, s);
     }
 
     /// [`build`](Self::build) with spatial splits (`s.quality` should be `High`, where
@@ -961,8 +920,15 @@ impl<'d> BuiltTree<'d> {
     /// room for one split reference per primitive (up to 2 references per triangle). Leaves may
     /// then share a triangle.
     pub fn build_split(&mut self, boxes: &[Aabb], tris: &[[Vec3; 3]], s: &TreeSettings) {
+        self.build_with(boxes, Some(tris), s);
+    }
+
+    /// [`build`](Self::build), or with `split` (the triangles) [`build_split`](Self::build_split).
+    fn build_with(&mut self, boxes: &[Aabb], split: Option<&[[Vec3; 3]]>, s: &TreeSettings) {
         self.prims.clear();
-        self.prims.reserve(2 * boxes.len());
+        if split.is_some() {
+            self.prims.reserve(2 * boxes.len());
+        }
         let mut bounds = Aabb::EMPTY;
         self.prims.extend(boxes.iter().enumerate().map(|(i, b)| {
             bounds = bounds.union(b);
@@ -974,7 +940,7 @@ impl<'d> BuiltTree<'d> {
             }
         }));
         self.bounds = bounds;
-        let mut user = tris;
+        let mut user = split.unwrap_or(&[]);
         let args = RTCBuildArguments {
             byte_size: std::mem::size_of::<RTCBuildArguments>(),
             build_quality: s.quality as c_uint,
@@ -989,18 +955,28 @@ impl<'d> BuiltTree<'d> {
             bvh: self.bvh,
             primitives: self.prims.as_mut_ptr(),
             primitive_count: self.prims.len(),
-            primitive_array_capacity: self.prims.capacity(),
+            primitive_array_capacity: if split.is_some() {
+                self.prims.capacity()
+            } else {
+                self.prims.len()
+            },
             create_node: Some(create_node),
             set_node_children: Some(set_children),
             set_node_bounds: Some(set_bounds),
             create_leaf: Some(create_id_leaf),
-            split_primitive: split_triangle as SplitPrimitive as *const c_void,
+            split_primitive: if split.is_some() {
+                split_triangle as SplitPrimitive as *const c_void
+            } else {
+                null()
+            },
             build_progress: null(),
             user_ptr: (&mut user as *mut &[[Vec3; 3]]).cast(),
         };
-        // SAFETY: as in `build`; Embree writes split references into the array's spare capacity
-        // (allocated, never read through the `Vec`), and `user` (read by `split_triangle`) lives
-        // for the whole call.
+        // SAFETY: `prims` lives (unmoved) for the whole call; the callbacks only write memory
+        // from Embree's allocator, which the BVH object owns until the next build or release.
+        // With splits, Embree writes split references into the array's spare capacity
+        // (allocated, never read through the `Vec`), and `user` (read by `split_triangle`)
+        // lives for the whole call.
         self.root = if self.prims.is_empty() {
             null_mut()
         } else {
