@@ -74,6 +74,27 @@ fn rays(tris: &[Triangle], seed: u64) -> Vec<Ray> {
     out
 }
 
+/// Triangles a leaf of `b` holds more than once (the collapse packs small subtrees whole, and
+/// with spatial splits their leaves may share a triangle: it must land in one lane only).
+fn repeats_in_a_leaf<L: strahl::math::Lane, const N: usize>(b: &strahl::layout::BvhWide<L, N>) -> usize {
+    let mut repeats = 0;
+    for code in b.nodes().iter().flat_map(|n| n.child) {
+        if code == strahl::layout::EMPTY_CHILD || code & strahl::layout::LEAF_BIT == 0 {
+            continue;
+        }
+        let (first, count) = strahl::layout::leaf_packs(code);
+        let mut prims: Vec<u32> = b.packs()[first..first + count]
+            .iter()
+            .flat_map(|p| (0..N).filter(|&i| p.valid >> i & 1 == 1).map(|i| p.prim[i]))
+            .collect();
+        let all = prims.len();
+        prims.sort_unstable();
+        prims.dedup();
+        repeats += all - prims.len();
+    }
+    repeats
+}
+
 /// The closest hit, any hit and filtered hits of every tree equal brute force's.
 #[test]
 fn hits_equal_brute_force() {
@@ -86,6 +107,14 @@ fn hits_equal_brute_force() {
             assert_eq!(stats.primitives as usize, tris.len(), "{what}");
             let b4 = Bvh4::from_bvh2(&bvh, &tris[..]).unwrap();
             let b8 = Bvh8::from_bvh2(&bvh, &tris[..]).unwrap();
+            assert_eq!(repeats_in_a_leaf(&b8), 0, "{what}: BVH8");
+            assert_eq!(repeats_in_a_leaf(&b4), 0, "{what}: BVH4");
+            let par = Bvh8::from_bvh2_par(&bvh, &tris[..], 3).unwrap();
+            assert_eq!(
+                (par.packs().len(), repeats_in_a_leaf(&par)),
+                (b8.packs().len(), 0),
+                "{what}"
+            );
             let odd = |h: &Hit| h.prim % 2 == 1;
             for ray in &rays {
                 let want = intersect_brute_force::<Watertight, _>(&tris[..], ray);
@@ -380,4 +409,45 @@ fn far_triangles_and_overflowing_clips() {
         let (l, r) = strahl::build::clip_triangle(&t, &within, 0, pos);
         assert!(l == within && r == within, "{pos}: {l:?} {r:?}");
     }
+}
+
+/// `validate_split` checks that the leaves' boxes cover all of each triangle, not only its
+/// corners: two leaves holding a triangle's ends but not a strip across its middle fail, boxes
+/// meeting exactly (or overlapping) pass, and one f32 ulp of gap fails.
+#[test]
+fn validate_split_sees_a_gap_inside_a_triangle() {
+    use strahl::build::Node;
+    let tris = [[Vec3::ZERO, Vec3::X, Vec3::Y]];
+    let tree = |right_min_x: f32| {
+        let left = Aabb::new(Vec3::ZERO, Vec3::new(0.4, 1.0, 0.0));
+        let right = Aabb::new(Vec3::new(right_min_x, 0.0, 0.0), Vec3::new(1.0, 0.6, 0.0));
+        let root = left.union(&right);
+        Bvh2 {
+            nodes: vec![
+                Node::interior(&root, 1),
+                Node::leaf(&left, 0, 1),
+                Node::leaf(&right, 1, 1),
+            ],
+            prim_indices: vec![0, 0],
+        }
+    };
+    // Every vertex lies in a box; the strip 0.4 < x < 0.6 in none.
+    assert_eq!(
+        tree(0.6).validate_split(&tris[..]).unwrap_err(),
+        ValidateError::PrimNotCovered { prim: 0 }
+    );
+    assert_eq!(
+        tree(0.4f32.next_up()).validate_split(&tris[..]).unwrap_err(),
+        ValidateError::PrimNotCovered { prim: 0 }
+    );
+    assert_eq!(tree(0.4).validate_split(&tris[..]).unwrap().primitives, 1);
+    assert_eq!(tree(0.3).validate_split(&tris[..]).unwrap().primitives, 1);
+    // A right box one ulp too low in y misses the triangle's sliver above it near x = 0.4.
+    let mut t = tree(0.4);
+    let short = Aabb::new(Vec3::new(0.4, 0.0, 0.0), Vec3::new(1.0, 0.6f32.next_down(), 0.0));
+    t.nodes[2] = Node::leaf(&short, 1, 1);
+    assert_eq!(
+        t.validate_split(&tris[..]).unwrap_err(),
+        ValidateError::PrimNotCovered { prim: 0 }
+    );
 }

@@ -786,8 +786,10 @@ mod tests {
         let mut r = Rng::new(11);
         let (mut checked, mut crossings) = (0, 0);
         for case in 0..4_000 {
-            let scale = [1.0, 1e-30, 1e30, 3.0e5][case % 4];
-            let offset = Vec3::new(r.f32(), r.f32(), r.f32()) * scale * [0.0, 1.0, 1e3][case % 3];
+            // Subnormal (1e-42: the `MIN_POSITIVE` term of the padding) to near `f32::MAX`.
+            let scale = [1.0, 1e-30, 1e30, 3.0e5, 1e-42, 1e37][(r.u64() % 6) as usize];
+            let far = if scale > 1e35 { 1.0 } else { 1e3 };
+            let offset = Vec3::new(r.f32(), r.f32(), r.f32()) * scale * [0.0, 1.0, far][case % 3];
             let mut t: Triangle = [0, 1, 2].map(|_| offset + Vec3::new(r.f32(), r.f32(), r.f32()) * scale);
             if case % 7 == 0 {
                 t[2] = t[0] + (t[1] - t[0]) * 1e-3; // a needle
@@ -813,8 +815,11 @@ mod tests {
             }
             assert!(l.is_empty() || l.max[axis] <= pos);
             assert!(rt.is_empty() || rt.min[axis] >= pos);
-            // Where the edges cross the plane (in f64, rounded once): in both boxes, if inside
-            // `within`. These are the points the clipping computes, with its rounding.
+            // Where the edges cross the plane, in f64 and not rounded to f32 (so that a padding
+            // short of the clipping's own rounding shows): in both boxes, if inside `within`.
+            let holds = |b: &Aabb, x: &[f64; 3]| {
+                (0..3).all(|a| a == axis || (b.min[a] as f64 <= x[a] && x[a] <= b.max[a] as f64))
+            };
             for e in 0..3 {
                 let (v0, v1) = (t[e], t[(e + 1) % 3]);
                 let (p0, p1) = (v0[axis] as f64, v1[axis] as f64);
@@ -822,12 +827,10 @@ mod tests {
                     continue;
                 }
                 let s = (pos as f64 - p0) / (p1 - p0);
-                let x = Vec3::from_array(core::array::from_fn(|a| {
-                    (v0[a] as f64 + (v1[a] as f64 - v0[a] as f64) * s) as f32
-                }));
-                if within.contains_point(x) {
+                let x: [f64; 3] = core::array::from_fn(|a| v0[a] as f64 + (v1[a] as f64 - v0[a] as f64) * s);
+                if holds(&within, &x) {
                     assert!(
-                        l.contains_point(x) && rt.contains_point(x),
+                        holds(&l, &x) && holds(&rt, &x),
                         "{case}: crossing {x:?} not in {l:?} and {rt:?}"
                     );
                     crossings += 1;

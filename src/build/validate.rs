@@ -223,8 +223,8 @@ pub enum ValidateError {
         /// The primitive.
         prim: u32,
     },
-    /// [`Bvh2::validate_split`]: a vertex of a referenced triangle lies in no box of the leaves
-    /// that reference it.
+    /// [`Bvh2::validate_split`]: part of a referenced triangle (a vertex, or a piece of its inside)
+    /// lies in no box of the leaves that reference it.
     PrimNotCovered {
         /// The primitive.
         prim: u32,
@@ -260,10 +260,7 @@ impl core::fmt::Display for ValidateError {
                 write!(f, "leaf {node}: primitive {prim}'s box is not inside the leaf's")
             }
             Self::PrimNotCovered { prim } => {
-                write!(
-                    f,
-                    "a vertex of triangle {prim} lies outside every leaf that references it"
-                )
+                write!(f, "part of triangle {prim} lies outside every leaf that references it")
             }
         }
     }
@@ -298,11 +295,10 @@ impl Bvh2 {
     /// ([`build_spatial`](Self::build_spatial)), whose leaves may share a triangle and cut
     /// through it: the same checks, except that a valid triangle must be referenced at least once
     /// (never twice by one leaf), each referencing leaf's box must touch the triangle's box
-    /// (intersect it: [`ValidateError::PrimNotContained`] otherwise), and each of its vertices
-    /// must lie in the box of some leaf that references it ([`ValidateError::PrimNotCovered`]).
-    /// Vertices only: a tree whose leaves miss the inside of a triangle (but not its corners)
-    /// passes; that every point is covered is what the builder's clipping and its tests against
-    /// brute force establish.
+    /// (intersect it: [`ValidateError::PrimNotContained`] otherwise), and the boxes of the leaves
+    /// that reference a triangle must together cover all of it ([`ValidateError::PrimNotCovered`]):
+    /// its vertices, and its inside, checked by cutting the triangle by each box in f64 (slivers
+    /// up to `1e-12` of the coordinates' magnitude outside every box are taken as rounding).
     /// [`BvhStats::primitives`] counts distinct triangles; [`BvhStats::mean_leaf_size`]
     /// references. A tree that passes [`validate`](Self::validate) passes this too.
     ///
@@ -333,9 +329,11 @@ impl Bvh2 {
         let mut node_seen = vec![false; nodes.len()];
         let mut slot_seen = vec![false; self.prim_indices.len()];
         // The last leaf that referenced each primitive (`u32::MAX`: none yet), and with `split`
-        // which of its vertices some referencing leaf's box holds (bits 0-2).
+        // which of its vertices some referencing leaf's box holds (bits 0-2; bit 3: one box holds
+        // all three, so the whole triangle), and the boxes of the leaves that hold part of it.
         let mut prim_seen = vec![u32::MAX; total];
         let mut covered = vec![0u8; if split.is_some() { total } else { 0 }];
+        let mut parts: Vec<(u32, Aabb)> = Vec::new();
         let mut slots = 0u64;
         let mut stats = BvhStats::default();
         let mut depth_sum = 0u64;
@@ -403,10 +401,15 @@ impl Bvh2 {
                             return Err(ValidateError::PrimNotContained { node: i, prim });
                         }
                         if let (Some(t), Some(c)) = (tri(prim as usize), covered.get_mut(prim as usize)) {
+                            let mut held = 0;
                             for (k, v) in t.iter().enumerate() {
                                 if b.contains_point(*v) {
-                                    *c |= 1 << k;
+                                    held |= 1 << k;
                                 }
+                            }
+                            *c |= held | if held == 7 { 8 } else { 0 };
+                            if held != 7 {
+                                parts.push((prim, b));
                             }
                         }
                     } else if !b.contains(&pb) {
@@ -443,9 +446,25 @@ impl Bvh2 {
         if let Some(p) = covered
             .iter()
             .zip(&prim_seen)
-            .position(|(&c, &s)| s != u32::MAX && c != 7)
+            .position(|(&c, &s)| s != u32::MAX && c & 7 != 7)
         {
             return Err(ValidateError::PrimNotCovered { prim: p as u32 });
+        }
+        // Triangles no single leaf box holds: the union of their leaves' boxes must cover them.
+        if let Some(tri) = split.as_ref() {
+            parts.retain(|&(p, _)| covered[p as usize] & 8 == 0);
+            parts.sort_unstable_by_key(|&(p, _)| p);
+            let mut boxes = Vec::new();
+            for run in parts.chunk_by(|a, b| a.0 == b.0) {
+                let prim = run[0].0;
+                boxes.clear();
+                boxes.extend(run.iter().map(|&(_, b)| b));
+                if let Some(t) = tri(prim as usize)
+                    && !covered_by(&t, &boxes)
+                {
+                    return Err(ValidateError::PrimNotCovered { prim });
+                }
+            }
         }
         if stats.leaves > 0 {
             stats.mean_leaf_size = slots as f32 / stats.leaves as f32;
@@ -453,4 +472,74 @@ impl Bvh2 {
         }
         Ok(stats)
     }
+}
+
+/// A convex polygon in f64 (at most 9 corners: a triangle cut by six planes).
+type Polygon = Vec<[f64; 3]>;
+
+/// Whether the boxes together cover every point of triangle `t`, in f64: the parts of `t` outside
+/// each box in turn are cut off, box by box (Sutherland-Hodgman against the six planes), and what
+/// is left must be nothing but slivers on the boxes' faces (at most `1e-12` of the coordinates'
+/// magnitude outside: the clipping's own rounding; the builder pads its boxes by 8 f32 epsilons).
+/// Past 4,096 pieces the answer is `true` (the vertices were checked already), so that no input
+/// makes this slow.
+fn covered_by(t: &Triangle, boxes: &[Aabb]) -> bool {
+    let mut scale = 0.0f64;
+    for v in t.iter().chain(boxes.iter().flat_map(|b| [&b.min, &b.max])) {
+        scale = scale.max(v.abs().max_element() as f64);
+    }
+    let tol = scale * 1e-12;
+    let mut pieces: Vec<Polygon> = vec![t.iter().map(|v| [v.x as f64, v.y as f64, v.z as f64]).collect()];
+    let mut next = Vec::new();
+    for b in boxes {
+        let (lo, hi) = (b.min.to_array().map(f64::from), b.max.to_array().map(f64::from));
+        for mut piece in pieces.drain(..) {
+            // Cut off the part beyond each plane; what stays inside all six is covered by `b`.
+            for a in 0..3 {
+                for (bound, sign) in [(hi[a], 1.0), (lo[a], -1.0)] {
+                    let depth = |v: &[f64; 3]| (v[a] - bound) * sign;
+                    if piece.iter().all(|v| depth(v) <= 0.0) {
+                        continue;
+                    }
+                    let (outside, inside) = (clip(&piece, |v| depth(v)), clip(&piece, |v| -depth(v)));
+                    if outside.iter().any(|v| depth(v) > tol) {
+                        next.push(outside);
+                    }
+                    piece = inside;
+                    if piece.is_empty() {
+                        break;
+                    }
+                }
+                if piece.is_empty() {
+                    break;
+                }
+            }
+        }
+        core::mem::swap(&mut pieces, &mut next);
+        if pieces.is_empty() {
+            return true;
+        }
+        if pieces.len() > 4096 {
+            return true;
+        }
+    }
+    false
+}
+
+/// The part of convex polygon `p` where `f >= 0` (`f` affine), by Sutherland-Hodgman; the
+/// crossing points are computed in f64.
+fn clip(p: &[[f64; 3]], f: impl Fn(&[f64; 3]) -> f64) -> Polygon {
+    let mut out = Vec::with_capacity(p.len() + 1);
+    for (i, a) in p.iter().enumerate() {
+        let b = &p[(i + 1) % p.len()];
+        let (fa, fb) = (f(a), f(b));
+        if fa >= 0.0 {
+            out.push(*a);
+        }
+        if (fa >= 0.0) != (fb >= 0.0) {
+            let s = fa / (fa - fb);
+            out.push([0, 1, 2].map(|k| a[k] + (b[k] - a[k]) * s));
+        }
+    }
+    out
 }

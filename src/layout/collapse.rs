@@ -55,6 +55,10 @@ struct Builder<'a, L, const N: usize, P: ?Sized> {
     counts: &'a [u32],
     /// The cost-optimal collapse's table (empty: the greedy collapse).
     plan: &'a Plan,
+    /// More references than triangles (spatial splits): a subtree packed whole may meet a
+    /// triangle twice, and its packs are counted after [`subtree_prims`](Self::subtree_prims)
+    /// drops the repeats.
+    repeats: bool,
     nodes: Vec<WideNode<L, N>>,
     packs: Vec<TriangleLanes<L, N>>,
     /// Where the packs go instead of `packs` (the parallel collapse: a worker's part of the
@@ -78,6 +82,7 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
             tris,
             counts,
             plan,
+            repeats: bvh.prim_indices.len() > tris.len(),
             nodes: Vec::new(),
             packs: Vec::new(),
             #[cfg(feature = "std")]
@@ -200,6 +205,18 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
                 todo.push(n.left());
             }
         }
+        // A tree with spatial splits (`Bvh2::build_spatial`) may reference one triangle from
+        // several of these leaves: one pack holds it once, so that a hit filter is asked once per
+        // triangle and leaf. Order kept; the subtrees packed here hold at most a few packs.
+        let mut kept = 0;
+        for i in 0..out.len() {
+            let p = out[i];
+            if !out[..kept].contains(&p) {
+                out[kept] = p;
+                kept += 1;
+            }
+        }
+        out.truncate(kept);
         Ok(out)
     }
 
@@ -264,7 +281,11 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
                     if self.count(k) > self.bvh.prim_indices.len() {
                         return Err(CollapseError::Malformed);
                     }
-                    Some(self.count(k))
+                    Some(if self.repeats {
+                        self.subtree_prims(k)?.len()
+                    } else {
+                        self.count(k)
+                    })
                 } else {
                     None
                 };
