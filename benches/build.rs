@@ -1060,8 +1060,10 @@ fn build(c: &mut Criterion) {
 /// `build_threads/soup1M`: the parallel builds (`Builder::build_into_par`, warm) of the builders
 /// that have one, on 1 thread and on every core (`available_parallelism`), side by side; each
 /// parallel tree is checked to have the single-threaded tree's SAH cost. With the `embree`
-/// feature, Embree's binned SAH builder on 1 thread and on every core. Then the BVH8 collapse
-/// (`Bvh8::from_bvh2` and `from_bvh2_par`, fresh memory each time, as a one-off build).
+/// feature, Embree's binned SAH builder on 1 thread and on every core. Spatial splits on the 262k
+/// soup: `Bvh2::build_spatial_par` on 1 thread and every core (and Embree's spatial-split
+/// builder likewise), cold. Then the BVH8 collapse (`Bvh8::from_bvh2` and `from_bvh2_par`, fresh
+/// memory each time, as a one-off build).
 fn build_threads(c: &mut Criterion) {
     let tris = scene::thin_soup(1 << 20, 1);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -1121,6 +1123,48 @@ fn build_threads(c: &mut Criterion) {
             })
         });
         drop(tree);
+        if cores == 1 {
+            break;
+        }
+    }
+    // Spatial splits on the 262k thin soup (the 1M one takes seconds a build): strahl's
+    // `build_spatial_par` (the sequential build's tree, checked) and Embree's spatial-split
+    // builder (`high+splits`), each on 1 thread and on every core, cold.
+    let small = scene::thin_soup(1 << 18, 1);
+    let (p, sp) = (BuildParams::default(), SpatialSplits::default());
+    let (one, _) = Bvh2::build_spatial(&small[..], &p, &sp).expect("valid params");
+    let (many, _) = Bvh2::build_spatial_par(&small[..], &p, &sp, cores).expect("valid params");
+    assert_eq!(
+        one.sah_cost(1.0, 1.0),
+        many.sah_cost(1.0, 1.0),
+        "spatial: parallel tree differs"
+    );
+    for threads in [1, cores] {
+        g.bench_function(format!("spatial262k/{threads}"), |b| {
+            b.iter(|| Bvh2::build_spatial_par(black_box(&small[..]), &p, &sp, threads))
+        });
+        if cores == 1 {
+            break;
+        }
+    }
+    #[cfg(feature = "embree")]
+    for threads in [1, cores] {
+        let device = peers::embree::Device::with_threads(threads);
+        let settings = peers::embree::TreeSettings {
+            quality: peers::embree::Quality::High,
+            max_leaf: 8,
+            traversal_cost: 1.0,
+            intersection_cost: 1.0,
+        };
+        let mut boxes: Vec<Aabb> = Vec::with_capacity(small.len());
+        g.bench_function(format!("peer/embree/high+splits262k/{threads}"), |b| {
+            b.iter(|| {
+                let mut tree = peers::embree::BuiltTree::new(&device);
+                boxes.clear();
+                boxes.extend(black_box(&small).iter().map(|t| Aabb::from_points(t)));
+                tree.build_split(&boxes, &small, &settings);
+            })
+        });
         if cores == 1 {
             break;
         }

@@ -451,3 +451,60 @@ fn validate_split_sees_a_gap_inside_a_triangle() {
         ValidateError::PrimNotCovered { prim: 0 }
     );
 }
+
+/// A tree in pre-order from the root (left before right), whatever its numbering: each node's
+/// box, and each leaf's primitives in order.
+fn canonical(b: &Bvh2) -> Vec<(Aabb, Option<Vec<u32>>)> {
+    let mut out = Vec::new();
+    let mut stack = if b.nodes.is_empty() { vec![] } else { vec![0u32] };
+    while let Some(i) = stack.pop() {
+        let n = &b.nodes[i as usize];
+        if n.is_leaf() {
+            out.push((n.aabb(), Some(b.prim_indices[n.prim_range()].to_vec())));
+        } else {
+            out.push((n.aabb(), None));
+            stack.push(n.left() + 1);
+            stack.push(n.left());
+        }
+    }
+    out
+}
+
+/// `build_spatial_par` builds the sequential build's tree (node for node, in pre-order) on any
+/// thread count, with the same statistics; bad input and bad knobs get the same answers.
+#[test]
+fn parallel_build_is_the_same_tree() {
+    let mut big = scene::thin_soup(30_000, 4);
+    big.extend(scene::sphereflake(2, 3).to_soup());
+    big.push([Vec3::ZERO, Vec3::X, Vec3::NAN]); // left out, counted
+    let mut list = scenes();
+    list.push(("thin soup and sphereflake", big));
+    list.push(("empty", vec![]));
+    list.push(("one", vec![[Vec3::ZERO, Vec3::X, Vec3::Y]]));
+    for (name, tris) in list {
+        for (kname, sp) in [("default", SpatialSplits::default()), ("eager", EAGER)] {
+            let what = format!("{name}/{kname}");
+            let (one, s1) = Bvh2::build_spatial(&tris[..], &BuildParams::default(), &sp).unwrap();
+            let want = canonical(&one);
+            for threads in [0, 1, 2, 3, 8] {
+                let (par, sp_stats) =
+                    Bvh2::build_spatial_par(&tris[..], &BuildParams::default(), &sp, threads).unwrap();
+                if !tris.is_empty() {
+                    par.validate_split(&tris[..])
+                        .unwrap_or_else(|e| panic!("{what} x{threads}: {e}"));
+                }
+                assert!(canonical(&par) == want, "{what} x{threads}: another tree");
+                assert_eq!(sp_stats, s1, "{what} x{threads}");
+            }
+        }
+    }
+    let bad = SpatialSplits {
+        bins: 1,
+        ..SpatialSplits::default()
+    };
+    let tris = scene::thin_soup(100, 1);
+    assert!(matches!(
+        Bvh2::build_spatial_par(&tris[..], &BuildParams::default(), &bad, 2),
+        Err(BuildError::InvalidParams(_))
+    ));
+}

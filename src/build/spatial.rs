@@ -18,7 +18,9 @@
 //! object split or the spatial split, whichever the SAH prices lowest. Executing a spatial split
 //! "unsplits" a straddling reference where putting it whole on one side is cheaper (the paper's
 //! reference unsplitting). [`SpatialSplits::max_references`] caps the references (a multiple of
-//! the valid triangles); where it is spent, only object splits remain.
+//! the valid triangles), shared down the tree in proportion to the children's references; where
+//! a subtree's share is spent, only object splits remain there. With `std`,
+//! [`Bvh2::build_spatial_par`] builds the same tree on several threads.
 //!
 //! Every clipped box is conservative: the crossing points of the triangle's edges with the plane
 //! are widened by a bound on their rounding before they enter a box, and each part's box is
@@ -54,7 +56,11 @@ pub struct SpatialSplits {
     /// `1e-5` there and here). `0` tries them everywhere. Finite, `>= 0`.
     pub alpha: f32,
     /// Most references the tree may hold, as a multiple of the valid triangles: `1.0` allows no
-    /// spatial split, `1.5` (the default) half again as many. In `1.0 ..= 16.0`.
+    /// spatial split, `1.5` (the default) half again as many. In `1.0 ..= 16.0`. The budget is
+    /// shared down the tree: a node's children get what it may still add in proportion to their
+    /// references (as Embree's spatial-split builder shares its extended ranges), so each
+    /// subtree's budget is its own and subtrees build alike in any order
+    /// ([`Bvh2::build_spatial_par`]).
     pub max_references: f32,
     /// Planes per axis of the spatial-split search, in [`MIN_BINS`](super::MIN_BINS)`..=`
     /// [`MAX_BINS`](super::MAX_BINS).
@@ -110,11 +116,14 @@ struct Ref {
 }
 
 /// A node still to build: its references are `buf[begin..end]`, always the top of the buffer.
+#[derive(Clone, Copy)]
 struct Task {
     begin: usize,
     end: usize,
     slot: u32,
     depth: u32,
+    /// The most references the task's subtree may hold (its share of the budget).
+    cap: usize,
     bounds: Bx,
 }
 
@@ -322,6 +331,53 @@ impl Bvh2 {
         params: &BuildParams,
         splits: &SpatialSplits,
     ) -> Result<(Bvh2, BuildStats), BuildError> {
+        spatial_build(tris, params, splits, |cx, root, mut buf, out, stats| {
+            cx.run(alloc::vec![root], &mut buf, out, stats, &mut Scratch::default(), None);
+        })
+    }
+
+    /// [`build_spatial`](Self::build_spatial) on `threads` threads (feature `std`): the same
+    /// tree, numbered differently. The top of the tree is built on the calling thread until the
+    /// tasks are small enough to share out; each subtree below is then built by one worker (its
+    /// share of the reference budget is its own, so the order does not matter) and the parts
+    /// are joined. `threads <= 1` is the sequential build.
+    ///
+    /// ```
+    /// use strahl::build::{BuildParams, Bvh2, SpatialSplits};
+    /// let soup = strahl::scene::thin_soup(20_000, 7);
+    /// let (p, sp) = (BuildParams::default(), SpatialSplits::default());
+    /// let (one, _) = Bvh2::build_spatial(&soup[..], &p, &sp).unwrap();
+    /// let (four, _) = Bvh2::build_spatial_par(&soup[..], &p, &sp, 4).unwrap();
+    /// four.validate_split(&soup[..]).unwrap();
+    /// assert_eq!(four.prim_indices.len(), one.prim_indices.len());
+    /// assert_eq!(four.sah_cost(1.0, 1.0), one.sah_cost(1.0, 1.0));
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn build_spatial_par<P: Triangles + Sync + ?Sized>(
+        tris: &P,
+        params: &BuildParams,
+        splits: &SpatialSplits,
+        threads: usize,
+    ) -> Result<(Bvh2, BuildStats), BuildError> {
+        spatial_build(tris, params, splits, |cx, root, mut buf, out, stats| {
+            if threads > 1 {
+                par::run(cx, root, buf, threads, out, stats);
+            } else {
+                cx.run(alloc::vec![root], &mut buf, out, stats, &mut Scratch::default(), None);
+            }
+        })
+    }
+}
+
+/// [`Bvh2::build_spatial`] with `build` making the tree below the root: it gets the build's
+/// context, the root task (node 0 is in the output), the references and the output.
+fn spatial_build<P: Triangles + ?Sized>(
+    tris: &P,
+    params: &BuildParams,
+    splits: &SpatialSplits,
+    build: impl FnOnce(&Ctx<'_, P>, Task, Vec<Ref>, &mut Bvh2, &mut BuildStats),
+) -> Result<(Bvh2, BuildStats), BuildError> {
+    {
         params.check()?;
         splits.check()?;
         let total = tris.len();
@@ -349,141 +405,27 @@ impl Bvh2 {
         }
         // Within `MAX_PRIMITIVES` (so every slot fits a `u32`).
         let budget = ((n as f64 * f64::from(splits.max_references)) as usize).min(MAX_PRIMITIVES);
-        let mut live = n;
-        let root_area = {
-            let d = (root.max.to_array(), root.min.to_array());
-            let e: [f64; 3] = core::array::from_fn(|a| f64::from(d.0[a]) - f64::from(d.1[a]));
-            e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+        let cx = Ctx {
+            tris,
+            params,
+            splits,
+            root_area: {
+                let d = (root.max.to_array(), root.min.to_array());
+                let e: [f64; 3] = core::array::from_fn(|a| f64::from(d.0[a]) - f64::from(d.1[a]));
+                e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+            },
         };
-        let mut s = Scratch::default();
         out.nodes.push(Node::leaf(&root.to_aabb(), 0, 1));
         out.prim_indices.reserve(n);
-        let mut tasks = alloc::vec![Task {
+        let root = Task {
             begin: 0,
             end: n,
             slot: 0,
             depth: 1,
+            cap: budget,
             bounds: root,
-        }];
-        while let Some(t) = tasks.pop() {
-            let count = t.end - t.begin;
-            let node_area = area(&t.bounds);
-            stats.max_depth = stats.max_depth.max(t.depth);
-            let leaf_ok = count as u32 <= params.max_leaf_size;
-            // A subtree of `count` references split at medians needs `ceil(log2 count)` levels.
-            let levels = usize::BITS - (count.max(1) - 1).leading_zeros();
-            let forced = t.depth + levels >= params.max_depth;
-            let mut object = None;
-            let mut choice = None;
-            if count as u32 > params.min_leaf_size && !forced {
-                let refs = &buf[t.begin..t.end];
-                let best = best_object(refs, object_bins(params, count), &mut s);
-                let try_spatial = live < budget
-                    && count >= splits.min_node_size as usize
-                    && match best {
-                        // In f64: a root area that overflows `f32` must not turn the test off.
-                        Some((_, _, _, ref lb, ref rb)) => {
-                            splits.alpha == 0.0
-                                || f64::from(area(&intersect(lb, rb))) > f64::from(splits.alpha) * root_area
-                        }
-                        None => true,
-                    };
-                object = best.map(|(axis, plane, cost, _, _)| Split::Object { axis, plane, cost });
-                choice = object;
-                if try_spatial
-                    && let Some(sp) = best_spatial(tris, refs, &t.bounds, splits.bins as usize, budget - live, &mut s)
-                    && sp.cost() < choice.map_or(f32::INFINITY, Split::cost)
-                {
-                    choice = Some(sp);
-                }
-                if let Some(c) = choice
-                    && leaf_ok
-                    && params.intersection_cost * count as f32 <= split_cost(params, c.cost(), node_area, count as u32)
-                {
-                    choice = None;
-                    object = None;
-                }
-            }
-            let leaf = count as u32 <= params.min_leaf_size || (choice.is_none() && (leaf_ok || count < 2));
-            if leaf {
-                let first = out.prim_indices.len() as u32;
-                out.prim_indices.extend(buf[t.begin..t.end].iter().map(|r| r.prim));
-                out.nodes[t.slot as usize] = Node::leaf(&t.bounds.to_aabb(), first, count as u32);
-                stats.leaves += 1;
-                buf.truncate(t.begin);
-                continue;
-            }
-            // Into `s.left` and `s.right`. A spatial split that fails to shrink both sides falls
-            // back to the object split; one whose bins put every centroid on one side, or none
-            // (the depth bound, coincident centroids), to the median.
-            let mut done = false;
-            if let Some(Split::Spatial {
-                axis,
-                pos,
-                left,
-                right,
-                nl,
-                nr,
-                ..
-            }) = choice
-            {
-                done = split_spatial(tris, &buf[t.begin..t.end], axis, pos, (left, nl), (right, nr), &mut s)
-                    && s.left.len() < count
-                    && s.right.len() < count
-                    && live + s.left.len() + s.right.len() - count <= budget;
-            }
-            if !done && let Some(Split::Object { axis, plane, .. }) = object {
-                s.left.clear();
-                s.right.clear();
-                let refs = &buf[t.begin..t.end];
-                let bins = object_bins(params, count);
-                let (lo, scale) = centroid_binning(refs, bins)[axis];
-                for r in refs {
-                    let c = r.b.min[axis] + r.b.max[axis];
-                    let bin = (((c - lo) * scale) as usize).min(bins - 1);
-                    if bin <= plane {
-                        s.left.push(*r);
-                    } else {
-                        s.right.push(*r);
-                    }
-                }
-                done = !s.left.is_empty() && !s.right.is_empty();
-            }
-            if !done {
-                stats.forced_splits += 1;
-                let refs = &mut buf[t.begin..t.end];
-                median(refs);
-                s.left.clear();
-                s.right.clear();
-                s.left.extend_from_slice(&refs[..count / 2]);
-                s.right.extend_from_slice(&refs[count / 2..]);
-            }
-            live = live + s.left.len() + s.right.len() - count;
-            buf.truncate(t.begin);
-            let (nl, nr) = (s.left.len(), s.right.len());
-            let lb = s.left.iter().fold(Bx::EMPTY, |a, r| a.union(&r.b));
-            let rb = s.right.iter().fold(Bx::EMPTY, |a, r| a.union(&r.b));
-            buf.extend_from_slice(&s.left);
-            buf.extend_from_slice(&s.right);
-            let l = out.nodes.len() as u32;
-            out.nodes[t.slot as usize] = Node::interior(&t.bounds.to_aabb(), l);
-            out.nodes.push(Node::leaf(&lb.to_aabb(), 0, 1));
-            out.nodes.push(Node::leaf(&rb.to_aabb(), 0, 1));
-            tasks.push(Task {
-                begin: t.begin,
-                end: t.begin + nl,
-                slot: l,
-                depth: t.depth + 1,
-                bounds: lb,
-            });
-            tasks.push(Task {
-                begin: t.begin + nl,
-                end: t.begin + nl + nr,
-                slot: l + 1,
-                depth: t.depth + 1,
-                bounds: rb,
-            });
-        }
+        };
+        build(&cx, root, buf, &mut out, &mut stats);
         stats.nodes = out.nodes.len() as u32;
         // The refinement passes work on node boxes alone, so they keep the clipped ones.
         // NOTE: a tree just built is well formed; the passes cannot fail on it.
@@ -508,6 +450,168 @@ impl Bvh2 {
             }
         }
         Ok((out, stats))
+    }
+}
+
+/// What every node of one spatial build reads.
+struct Ctx<'a, P: ?Sized> {
+    tris: &'a P,
+    params: &'a BuildParams,
+    splits: &'a SpatialSplits,
+    /// The root box's surface area (half), in f64: the overlap threshold's unit.
+    root_area: f64,
+}
+
+/// A subtree left for a worker: its task and references.
+type Job = (Task, Vec<Ref>);
+
+impl<P: Triangles + ?Sized> Ctx<'_, P> {
+    /// Builds `tasks` (their references the top of `buf`, each task's node already in `out`)
+    /// into `out`, depth first. With `defer = Some((grain, jobs))`, a task of at most `grain`
+    /// references is not built but moved to `jobs` with its references (the parallel build).
+    fn run(
+        &self,
+        mut tasks: Vec<Task>,
+        buf: &mut Vec<Ref>,
+        out: &mut Bvh2,
+        stats: &mut BuildStats,
+        s: &mut Scratch,
+        mut defer: Option<(usize, &mut Vec<Job>)>,
+    ) {
+        while let Some(t) = tasks.pop() {
+            let count = t.end - t.begin;
+            if let Some((grain, jobs)) = defer.as_mut()
+                && count <= *grain
+            {
+                // Its references are the top of `buf` (see `Task`).
+                jobs.push((t, buf.split_off(t.begin)));
+                continue;
+            }
+            let node_area = area(&t.bounds);
+            stats.max_depth = stats.max_depth.max(t.depth);
+            let leaf_ok = count as u32 <= self.params.max_leaf_size;
+            // A subtree of `count` references split at medians needs `ceil(log2 count)` levels.
+            let levels = usize::BITS - (count.max(1) - 1).leading_zeros();
+            let forced = t.depth + levels >= self.params.max_depth;
+            let mut object = None;
+            let mut choice = None;
+            if count as u32 > self.params.min_leaf_size && !forced {
+                let refs = &buf[t.begin..t.end];
+                let best = best_object(refs, object_bins(self.params, count), s);
+                let try_spatial = count < t.cap
+                    && count >= self.splits.min_node_size as usize
+                    && match best {
+                        // In f64: a root area that overflows `f32` must not turn the test off.
+                        Some((_, _, _, ref lb, ref rb)) => {
+                            self.splits.alpha == 0.0
+                                || f64::from(area(&intersect(lb, rb))) > f64::from(self.splits.alpha) * self.root_area
+                        }
+                        None => true,
+                    };
+                object = best.map(|(axis, plane, cost, _, _)| Split::Object { axis, plane, cost });
+                choice = object;
+                if try_spatial
+                    && let Some(sp) =
+                        best_spatial(self.tris, refs, &t.bounds, self.splits.bins as usize, t.cap - count, s)
+                    && sp.cost() < choice.map_or(f32::INFINITY, Split::cost)
+                {
+                    choice = Some(sp);
+                }
+                if let Some(c) = choice
+                    && leaf_ok
+                    && self.params.intersection_cost * count as f32
+                        <= split_cost(self.params, c.cost(), node_area, count as u32)
+                {
+                    choice = None;
+                    object = None;
+                }
+            }
+            let leaf = count as u32 <= self.params.min_leaf_size || (choice.is_none() && (leaf_ok || count < 2));
+            if leaf {
+                let first = out.prim_indices.len() as u32;
+                out.prim_indices.extend(buf[t.begin..t.end].iter().map(|r| r.prim));
+                out.nodes[t.slot as usize] = Node::leaf(&t.bounds.to_aabb(), first, count as u32);
+                stats.leaves += 1;
+                buf.truncate(t.begin);
+                continue;
+            }
+            // Into `s.left` and `s.right`. A spatial split that fails to shrink both sides falls
+            // back to the object split; one whose bins put every centroid on one side, or none
+            // (the depth bound, coincident centroids), to the median.
+            let mut done = false;
+            if let Some(Split::Spatial {
+                axis,
+                pos,
+                left,
+                right,
+                nl,
+                nr,
+                ..
+            }) = choice
+            {
+                done = split_spatial(self.tris, &buf[t.begin..t.end], axis, pos, (left, nl), (right, nr), s)
+                    && s.left.len() < count
+                    && s.right.len() < count
+                    && s.left.len() + s.right.len() <= t.cap;
+            }
+            if !done && let Some(Split::Object { axis, plane, .. }) = object {
+                s.left.clear();
+                s.right.clear();
+                let refs = &buf[t.begin..t.end];
+                let bins = object_bins(self.params, count);
+                let (lo, scale) = centroid_binning(refs, bins)[axis];
+                for r in refs {
+                    let c = r.b.min[axis] + r.b.max[axis];
+                    let bin = (((c - lo) * scale) as usize).min(bins - 1);
+                    if bin <= plane {
+                        s.left.push(*r);
+                    } else {
+                        s.right.push(*r);
+                    }
+                }
+                done = !s.left.is_empty() && !s.right.is_empty();
+            }
+            if !done {
+                stats.forced_splits += 1;
+                let refs = &mut buf[t.begin..t.end];
+                median(refs);
+                s.left.clear();
+                s.right.clear();
+                s.left.extend_from_slice(&refs[..count / 2]);
+                s.right.extend_from_slice(&refs[count / 2..]);
+            }
+            buf.truncate(t.begin);
+            let (nl, nr) = (s.left.len(), s.right.len());
+            let lb = s.left.iter().fold(Bx::EMPTY, |a, r| a.union(&r.b));
+            let rb = s.right.iter().fold(Bx::EMPTY, |a, r| a.union(&r.b));
+            buf.extend_from_slice(&s.left);
+            buf.extend_from_slice(&s.right);
+            let l = out.nodes.len() as u32;
+            out.nodes[t.slot as usize] = Node::interior(&t.bounds.to_aabb(), l);
+            out.nodes.push(Node::leaf(&lb.to_aabb(), 0, 1));
+            out.nodes.push(Node::leaf(&rb.to_aabb(), 0, 1));
+            // The references the node may still add, shared in proportion to the children's
+            // (as Embree's spatial-split builder shares its extended ranges): each subtree's
+            // budget is its own, so subtrees build alike in any order (or on other threads).
+            let spare = t.cap - (nl + nr);
+            let lspare = (spare as u64 * nl as u64 / (nl + nr) as u64) as usize;
+            tasks.push(Task {
+                begin: t.begin,
+                end: t.begin + nl,
+                slot: l,
+                depth: t.depth + 1,
+                cap: nl + lspare,
+                bounds: lb,
+            });
+            tasks.push(Task {
+                begin: t.begin + nl,
+                end: t.begin + nl + nr,
+                slot: l + 1,
+                depth: t.depth + 1,
+                cap: nr + (spare - lspare),
+                bounds: rb,
+            });
+        }
     }
 }
 
@@ -767,6 +871,125 @@ fn median(refs: &mut [Ref]) {
             let (ca, cb) = (a.b.min[axis] + a.b.max[axis], b.b.min[axis] + b.b.max[axis]);
             ca.total_cmp(&cb)
         });
+    }
+}
+
+/// The parallel spatial build ([`Bvh2::build_spatial_par`]).
+#[cfg(feature = "std")]
+mod par {
+    use super::{BuildStats, Bvh2, Ctx, Job, Node, Ref, Scratch, Task};
+    use crate::geometry::Triangles;
+    use alloc::vec::Vec;
+    use std::sync::Mutex;
+
+    /// The smallest subtree handed to a worker whole.
+    const GRAIN_MIN: usize = 2048;
+
+    /// A job's result: its part of the tree (node 0 the job's node), its counters, and the jobs
+    /// it left (slots in the part).
+    type Part = (Bvh2, BuildStats, Vec<Job>);
+
+    /// Builds the tree below `root` (node 0 of `out`) in rounds: each round splits every job
+    /// above the grain (`n / (8 threads)` references, at least [`GRAIN_MIN`]) once, the jobs side
+    /// by side; then each job's whole subtree, largest first. Every part is moved into `out` in
+    /// job order, so the numbering does not depend on which thread built what.
+    pub(super) fn run<P: Triangles + Sync + ?Sized>(
+        cx: &Ctx<'_, P>,
+        root: Task,
+        buf: Vec<Ref>,
+        threads: usize,
+        out: &mut Bvh2,
+        stats: &mut BuildStats,
+    ) {
+        let grain = ((root.end - root.begin) / (threads * 8)).max(GRAIN_MIN);
+        let mut jobs: Vec<Job> = alloc::vec![(root, buf)];
+        while jobs.iter().any(|j| j.1.len() > grain) {
+            let (big, small): (Vec<Job>, Vec<Job>) = jobs.into_iter().partition(|j| j.1.len() > grain);
+            // Split once: a task of `count` references defers its children (fewer each).
+            let parts = map_par(big, threads, |(t, mut refs)| part(cx, t, &mut refs, true));
+            jobs = small;
+            for (slot, p) in parts {
+                jobs.extend(join(out, stats, slot, p));
+            }
+        }
+        jobs.sort_by_key(|j| core::cmp::Reverse(j.1.len()));
+        for (slot, p) in map_par(jobs, threads, |(t, mut refs)| part(cx, t, &mut refs, false)) {
+            join(out, stats, slot, p);
+        }
+    }
+
+    /// The part of the tree of job `t` over `refs`: its whole subtree, or with `once` its split
+    /// (or leaf) and the children left as jobs.
+    fn part<P: Triangles + ?Sized>(cx: &Ctx<'_, P>, t: Task, refs: &mut Vec<Ref>, once: bool) -> (u32, Part) {
+        let mut sub = Bvh2::default();
+        sub.nodes.push(Node::leaf(&t.bounds.to_aabb(), 0, 1));
+        let local = Task {
+            begin: 0,
+            end: refs.len(),
+            slot: 0,
+            ..t
+        };
+        let (mut st, mut left) = (BuildStats::default(), Vec::new());
+        let defer = once.then(|| (refs.len() - 1, &mut left));
+        cx.run(
+            alloc::vec![local],
+            refs,
+            &mut sub,
+            &mut st,
+            &mut Scratch::default(),
+            defer,
+        );
+        (t.slot, (sub, st, left))
+    }
+
+    /// Moves `part` into `out` at node `slot`: its node `i >= 1` to `base + i - 1`, its leaves'
+    /// slots after `out`'s; the jobs it left, with their slots moved the same way.
+    fn join(out: &mut Bvh2, stats: &mut BuildStats, slot: u32, (sub, st, left): Part) -> Vec<Job> {
+        let base = out.nodes.len() as u32;
+        let first = out.prim_indices.len() as u32;
+        let relocate = |n: &Node| {
+            if n.is_leaf() {
+                Node::leaf(&n.aabb(), n.index + first, n.count)
+            } else {
+                Node::interior(&n.aabb(), base + n.left() - 1)
+            }
+        };
+        out.nodes[slot as usize] = relocate(&sub.nodes[0]);
+        for n in &sub.nodes[1..] {
+            out.nodes.push(relocate(n));
+        }
+        out.prim_indices.extend_from_slice(&sub.prim_indices);
+        stats.leaves += st.leaves;
+        stats.forced_splits += st.forced_splits;
+        stats.max_depth = stats.max_depth.max(st.max_depth);
+        left.into_iter()
+            .map(|(t, refs)| {
+                let slot = base + t.slot - 1;
+                (Task { slot, ..t }, refs)
+            })
+            .collect()
+    }
+
+    /// `f` of every job on up to `threads` threads, the results in job order. A job no thread
+    /// took (none could be started) runs on this one.
+    fn map_par<J: Send, R: Send>(jobs: Vec<J>, threads: usize, f: impl Fn(J) -> R + Sync) -> Vec<R> {
+        let slots: Vec<Mutex<Option<J>>> = jobs.into_iter().map(|j| Mutex::new(Some(j))).collect();
+        let done: Vec<Mutex<Option<R>>> = slots.iter().map(|_| Mutex::new(None)).collect();
+        let run = |i: usize| {
+            if let Some(j) = slots[i].lock().ok().and_then(|mut g| g.take()) {
+                let r = f(j);
+                if let Ok(mut g) = done[i].lock() {
+                    *g = Some(r);
+                }
+            }
+        };
+        crate::par::each_job((0..slots.len()).collect(), threads, run);
+        (0..slots.len())
+            .filter_map(|i| {
+                run(i);
+                done[i].lock().ok().and_then(|mut g| g.take())
+            })
+            .collect()
     }
 }
 
