@@ -9,8 +9,8 @@
 //! cargo run --release --example render -- model.obj    # your OBJ file
 //! ```
 //! Options after the path: `--size WxH`, `--ao N` (AO rays per pixel, default 8), `--threads T`,
-//! `--spatial` (build with spatial splits, `Bvh2::build_spatial`: slower to build, a better tree
-//! for scenes of long thin or large triangles; single-threaded).
+//! `--spatial` (build with spatial splits, `Bvh2::build_spatial_par` on the same threads: slower
+//! to build, a better tree for scenes of long thin or large triangles).
 
 use std::time::Instant;
 use strahl::build::{BuildParams, Bvh2, SpatialSplits};
@@ -182,7 +182,7 @@ impl Tracer for Instanced {
 fn build(tris: &[Triangle], o: &Options) -> Option<(Bvh2, Bvh8)> {
     let t0 = Instant::now();
     let built = if o.spatial {
-        Bvh2::build_spatial(tris, &BuildParams::default(), &SpatialSplits::default())
+        Bvh2::build_spatial_par(tris, &BuildParams::default(), &SpatialSplits::default(), o.threads)
     } else {
         Bvh2::build_par(tris, &BuildParams::default(), o.threads)
     };
@@ -199,11 +199,11 @@ fn build(tris: &[Triangle], o: &Options) -> Option<(Bvh2, Bvh8)> {
     let collapse_s = t0.elapsed().as_secs_f64();
     println!(
         "build: {} {:.1} ms ({:.1} M tri/s, {} invalid triangles skipped), collapse to BVH8 {:.1} ms, SAH cost {:.1}, {} BVH8 nodes{}",
-        if o.spatial {
-            "spatial splits on 1 thread".to_string()
-        } else {
-            format!("binned SAH on up to {} threads", o.threads)
-        },
+        format!(
+            "{} on up to {} threads",
+            if o.spatial { "spatial splits" } else { "binned SAH" },
+            o.threads
+        ),
         build_s * 1e3,
         stats.primitives as f64 / build_s / 1e6,
         stats.invalid,
