@@ -219,6 +219,30 @@ fn builders() -> Vec<(&'static str, BuildParams)> {
                 ..BuildParams::fast()
             },
         ),
+        (
+            "lbvh30+treelets",
+            BuildParams {
+                refine: Refine::Treelets(TreeletParams::new()),
+                ..BuildParams::fastest()
+            },
+        ),
+        (
+            "lbvh30+agglomerative treelets",
+            BuildParams {
+                refine: Refine::AgglomerativeTreelets(TreeletParams::agglomerative()),
+                ..BuildParams::fastest()
+            },
+        ),
+        (
+            "hlbvh-sah+agglomerative treelets",
+            BuildParams {
+                refine: Refine::AgglomerativeTreelets(TreeletParams {
+                    rounds: 1,
+                    ..TreeletParams::agglomerative()
+                }),
+                ..BuildParams::hybrid_sah()
+            },
+        ),
     ]
 }
 

@@ -198,12 +198,9 @@ fn build(tris: &[Triangle], o: &Options) -> Option<(Bvh2, Bvh8)> {
     let bvh = Bvh8::from_bvh2_par(&bvh2, tris, o.threads).expect("a built tree collapses");
     let collapse_s = t0.elapsed().as_secs_f64();
     println!(
-        "build: {} {:.1} ms ({:.1} M tri/s, {} invalid triangles skipped), collapse to BVH8 {:.1} ms, SAH cost {:.1}, {} BVH8 nodes{}",
-        format!(
-            "{} on up to {} threads",
-            if o.spatial { "spatial splits" } else { "binned SAH" },
-            o.threads
-        ),
+        "build: {} on up to {} threads {:.1} ms ({:.1} M tri/s, {} invalid triangles skipped), collapse to BVH8 {:.1} ms, SAH cost {:.1}, {} BVH8 nodes{}",
+        if o.spatial { "spatial splits" } else { "binned SAH" },
+        o.threads,
         build_s * 1e3,
         stats.primitives as f64 / build_s / 1e6,
         stats.invalid,

@@ -221,6 +221,25 @@ fn params() -> Vec<(String, BuildParams)> {
                     ..b
                 },
             ),
+            (
+                "atr16",
+                BuildParams {
+                    refine: Refine::AgglomerativeTreelets(TreeletParams {
+                        leaves: 16,
+                        min_prims: 1,
+                        rounds: 2,
+                    }),
+                    ..b
+                },
+            ),
+            (
+                "atr9-d34",
+                BuildParams {
+                    refine: Refine::AgglomerativeTreelets(TreeletParams::agglomerative()),
+                    max_depth: 34,
+                    ..b
+                },
+            ),
         ];
         v.extend(odd.into_iter().map(|(n, p)| (format!("{s:?}-{n}"), p)));
     }
@@ -953,6 +972,11 @@ fn depth_bound_on_deep_scene() {
         Refine::Rotations(3),
         Refine::Treelets(TreeletParams {
             leaves: 8,
+            min_prims: 1,
+            rounds: 1,
+        }),
+        Refine::AgglomerativeTreelets(TreeletParams {
+            leaves: 16,
             min_prims: 1,
             rounds: 1,
         }),

@@ -59,14 +59,22 @@ fn treelets_never_increase_sah_cost() {
             for max_depth in [34, 64] {
                 let base = BuildParams { max_depth, ..base };
                 let (bvh, _) = builder.build(&tris[..], &base).unwrap();
-                for tp in [
-                    treelets(3, 1, 1),
-                    treelets(7, 2, 2),
-                    treelets(8, 1, 1),
-                    treelets(5, 50, 3),
+                for (agglomerative, tp) in [
+                    (false, treelets(3, 1, 1)),
+                    (false, treelets(7, 2, 2)),
+                    (false, treelets(8, 1, 1)),
+                    (false, treelets(5, 50, 3)),
+                    (true, treelets(3, 1, 1)),
+                    (true, TreeletParams::agglomerative()),
+                    (true, treelets(16, 1, 2)),
+                    (true, treelets(12, 40, 1)),
                 ] {
                     let mut t = bvh.clone();
-                    let stats = builder.optimize_treelets(&mut t, &tp, max_depth).unwrap();
+                    let stats = if agglomerative {
+                        builder.optimize_treelets_agglomerative(&mut t, &tp, max_depth).unwrap()
+                    } else {
+                        builder.optimize_treelets(&mut t, &tp, max_depth).unwrap()
+                    };
                     let v = t
                         .validate(&tris[..])
                         .unwrap_or_else(|e| panic!("{scene}/{base:?}: {e}"));
@@ -182,6 +190,18 @@ fn treelets_reduce_lbvh_cost_and_hybrid_beats_lbvh() {
         assert!(stats.restructured > 0 && stats.treelets >= stats.restructured);
         assert!(after < before * 0.97, "{scene}: {before} -> {after}");
         lbvh.validate(&tris[..]).unwrap();
+        // The agglomerative pass (ATRBVH) with 9 leaves, two rounds: as good a tree.
+        let (mut atr, _) = Bvh2::build(&tris[..], &BuildParams::fastest()).unwrap();
+        let stats = atr
+            .optimize_treelets_agglomerative(&TreeletParams::agglomerative(), 64)
+            .unwrap();
+        let agg = atr.sah_cost(1.0, 1.0);
+        assert!(stats.restructured > 0 && stats.treelets >= stats.restructured);
+        assert!(
+            agg < before * 0.97 && agg < after * 1.01,
+            "{scene}: {before} -> {agg} ({after})"
+        );
+        atr.validate(&tris[..]).unwrap();
         let hl = cost(BuildParams {
             refine: Refine::None,
             ..BuildParams::hybrid()
@@ -237,6 +257,10 @@ fn closest_hits_equal_brute_force() {
                 refine: Refine::Treelets(treelets(4, 1, 2)),
                 ..BuildParams::hybrid()
             },
+            BuildParams {
+                refine: Refine::AgglomerativeTreelets(treelets(16, 1, 2)),
+                ..BuildParams::fastest()
+            },
         ] {
             let (bvh, _) = Bvh2::build(&tris[..], &p).unwrap();
             bvh.validate(&tris[..]).unwrap();
@@ -283,16 +307,30 @@ fn treelets_on_malformed_and_tiny_trees() {
     b.nodes[interior + 1].count = 0;
     cases.push(b);
     for bad in cases {
-        let mut t = bad.clone();
-        let e = t.optimize_treelets(&TreeletParams::default(), 64).unwrap_err();
-        assert!(matches!(
-            e,
-            ValidateError::ChildOutOfRange { .. }
-                | ValidateError::SlotsOutOfRange { .. }
-                | ValidateError::NodeReachedTwice { .. }
-        ));
-        assert_eq!(t, bad);
+        for agglomerative in [false, true] {
+            let mut t = bad.clone();
+            let e = if agglomerative {
+                t.optimize_treelets_agglomerative(&TreeletParams::agglomerative(), 64)
+            } else {
+                t.optimize_treelets(&TreeletParams::default(), 64)
+            }
+            .unwrap_err();
+            assert!(matches!(
+                e,
+                ValidateError::ChildOutOfRange { .. }
+                    | ValidateError::SlotsOutOfRange { .. }
+                    | ValidateError::NodeReachedTwice { .. }
+            ));
+            assert_eq!(t, bad);
+        }
     }
+    assert_eq!(
+        Bvh2::default()
+            .optimize_treelets_agglomerative(&TreeletParams::agglomerative(), 64)
+            .unwrap()
+            .max_depth,
+        0
+    );
     let mut empty = Bvh2::default();
     assert_eq!(
         empty
@@ -305,6 +343,11 @@ fn treelets_on_malformed_and_tiny_trees() {
     let (mut bvh, _) = Bvh2::build(&one[..], &BuildParams::fastest()).unwrap();
     let before = bvh.clone();
     let s = bvh.optimize_treelets(&TreeletParams::default(), 64).unwrap();
+    assert_eq!((s.treelets, s.restructured, s.max_depth), (0, 0, 1));
+    assert_eq!(bvh, before);
+    let s = bvh
+        .optimize_treelets_agglomerative(&TreeletParams::agglomerative(), 64)
+        .unwrap();
     assert_eq!((s.treelets, s.restructured, s.max_depth), (0, 0, 1));
     assert_eq!(bvh, before);
 }

@@ -251,9 +251,10 @@ impl Builder {
                 stats.restructured = r.rotations;
             }
         }
-        if let (Refine::Treelets(t), true) = (params.refine, n > 0) {
+        if let (Refine::Treelets(t) | Refine::AgglomerativeTreelets(t), true) = (params.refine, n > 0) {
+            let agglomerative = matches!(params.refine, Refine::AgglomerativeTreelets(_));
             // NOTE: a tree just built is well formed; the pass cannot fail on it.
-            if let Ok(r) = treelet::optimize(out, &t, params.max_depth, &mut self.treelet) {
+            if let Ok(r) = treelet::optimize_with(out, &t, agglomerative, params.max_depth, &mut self.treelet) {
                 stats.max_depth = r.max_depth;
                 stats.restructured = r.restructured;
             }
@@ -290,6 +291,29 @@ impl Builder {
     ) -> Result<TreeletStats, ValidateError> {
         let max_depth = max_depth.min(crate::traverse::MAX_DEPTH);
         treelet::optimize(bvh, params, max_depth, &mut self.treelet)
+    }
+
+    /// [`Bvh2::optimize_treelets_agglomerative`] with this builder's memory (kept for the next
+    /// call).
+    ///
+    /// ```
+    /// use strahl::{build::{Builder, BuildParams, TreeletParams}, scene};
+    /// let soup = scene::clustered_soup(3000, 5, 1);
+    /// let mut builder = Builder::new();
+    /// let (mut bvh, _) = builder.build(&soup[..], &BuildParams::fastest()).unwrap();
+    /// let before = bvh.sah_cost(1.0, 1.0);
+    /// builder.optimize_treelets_agglomerative(&mut bvh, &TreeletParams::agglomerative(), 64).unwrap();
+    /// assert!(bvh.sah_cost(1.0, 1.0) < before);
+    /// assert!(bvh.validate(&soup[..]).is_ok());
+    /// ```
+    pub fn optimize_treelets_agglomerative(
+        &mut self,
+        bvh: &mut Bvh2,
+        params: &TreeletParams,
+        max_depth: u32,
+    ) -> Result<TreeletStats, ValidateError> {
+        let max_depth = max_depth.min(crate::traverse::MAX_DEPTH);
+        treelet::optimize_with(bvh, params, true, max_depth, &mut self.treelet)
     }
 
     /// [`Bvh2::optimize_reinsertion`] with this builder's memory (kept for the next call).

@@ -91,6 +91,11 @@ pub enum Refine {
     /// [`Bvh2::optimize_reinsertion`](super::Bvh2::optimize_reinsertion): subtrees moved to where
     /// they cost least; never worse by the SAH.
     Reinsertion(super::ReinsertParams),
+    /// Agglomerative treelet restructuring (ATRBVH, Domingues and Pedrini 2015), see
+    /// [`Bvh2::optimize_treelets_agglomerative`](super::Bvh2::optimize_treelets_agglomerative):
+    /// larger treelets (up to 16 leaves) for less work than [`Treelets`](Self::Treelets)' exact
+    /// search; never worse by the SAH.
+    AgglomerativeTreelets(TreeletParams),
 }
 
 /// The knobs of treelet restructuring ([`Refine::Treelets`],
@@ -112,7 +117,8 @@ pub enum Refine {
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct TreeletParams {
-    /// Leaves per treelet, in `3 ..= 8` (Karras: 7).
+    /// Leaves per treelet, in `3 ..= 8` (Karras: 7); `3 ..= 16` for the agglomerative pass
+    /// (Domingues and Pedrini: 9).
     pub leaves: u32,
     /// Treelets are formed only at nodes with at least this many primitives below them
     /// (Karras' `gamma`; 1: at every interior node). `>= 1`.
@@ -136,6 +142,31 @@ impl TreeletParams {
             leaves: 7,
             min_prims: 2,
             rounds: 1,
+        }
+    }
+}
+
+impl TreeletParams {
+    /// The agglomerative pass's knobs ([`Refine::AgglomerativeTreelets`]): 9 leaves (Domingues
+    /// and Pedrini's choice), every node with at least 2 primitives, two rounds.
+    ///
+    /// ```
+    /// use strahl::build::{BuildParams, Bvh2, Refine, TreeletParams};
+    /// let t = TreeletParams::agglomerative();
+    /// assert_eq!((t.leaves, t.min_prims, t.rounds), (9, 2, 2));
+    /// let p = BuildParams { refine: Refine::AgglomerativeTreelets(t), ..BuildParams::fastest() };
+    /// assert!(p.check().is_ok());
+    /// assert!(BuildParams { refine: Refine::Treelets(t), ..p }.check().is_err()); // 9 > 8
+    /// let soup = strahl::scene::thin_soup(2_000, 3);
+    /// let (plain, _) = Bvh2::build(&soup[..], &BuildParams::fastest()).unwrap();
+    /// let (better, _) = Bvh2::build(&soup[..], &p).unwrap();
+    /// assert!(better.sah_cost(1.0, 1.0) < plain.sah_cost(1.0, 1.0));
+    /// ```
+    pub const fn agglomerative() -> Self {
+        Self {
+            leaves: 9,
+            min_prims: 2,
+            rounds: 2,
         }
     }
 }
@@ -687,9 +718,12 @@ impl BuildParams {
         {
             return bad("refine: rotation rounds must be in 1 ..= 64");
         }
-        if let Refine::Treelets(t) = self.refine {
-            if !(3..=8).contains(&t.leaves) {
+        if let Refine::Treelets(t) | Refine::AgglomerativeTreelets(t) = self.refine {
+            if matches!(self.refine, Refine::Treelets(_)) && !(3..=8).contains(&t.leaves) {
                 return bad("refine: treelet leaves must be in 3 ..= 8");
+            }
+            if !(3..=16).contains(&t.leaves) {
+                return bad("refine: agglomerative treelet leaves must be in 3 ..= 16");
             }
             if t.min_prims == 0 {
                 return bad("refine: treelet min_prims must be >= 1");

@@ -442,6 +442,11 @@ fn spatial_build<P: Triangles + ?Sized>(
                     (stats.max_depth, stats.restructured) = (r.max_depth, r.restructured);
                 }
             }
+            Refine::AgglomerativeTreelets(t) => {
+                if let Ok(r) = out.optimize_treelets_agglomerative(&t, depth) {
+                    (stats.max_depth, stats.restructured) = (r.max_depth, r.restructured);
+                }
+            }
             Refine::Reinsertion(p) => {
                 if let Ok(r) = out.optimize_reinsertion(&p, depth) {
                     (stats.max_depth, stats.restructured) = (r.max_depth, r.moved);
