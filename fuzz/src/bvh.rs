@@ -101,6 +101,14 @@ pub fn builders() -> Vec<BuildParams> {
             refine: Refine::Treelets(TreeletParams::new()),
             ..BuildParams::fastest()
         },
+        BuildParams {
+            refine: Refine::AgglomerativeTreelets(TreeletParams {
+                leaves: 16,
+                min_prims: 1,
+                rounds: 2,
+            }),
+            ..BuildParams::fastest()
+        },
         BuildParams::hybrid_sah(),
         BuildParams {
             refine: Refine::Rotations(2),
@@ -380,9 +388,32 @@ fn check_spatial(case: &BvhCase, kept: &[Triangle], scene_tame: bool) {
             .validate_split(tris)
             .unwrap_or_else(|e| panic!("spatial {bins}: validate_split: {e:?}"));
         let held = kept.iter().filter(|t| !t[0].is_nan()).count();
-        assert_eq!((report.primitives as usize, stats.primitives as usize), (held, held), "spatial {bins}");
-        assert!(b2.prim_indices.len() <= 4 * held, "spatial {bins}: {} references", b2.prim_indices.len());
+        assert_eq!(
+            (report.primitives as usize, stats.primitives as usize),
+            (held, held),
+            "spatial {bins}"
+        );
+        assert!(
+            b2.prim_indices.len() <= 4 * held,
+            "spatial {bins}: {} references",
+            b2.prim_indices.len()
+        );
         let b8 = Bvh8::from_bvh2(&b2, tris).expect("a valid tree collapses");
+        // A wide leaf holds a triangle once (the collapse drops the repeats of split triangles).
+        for code in b8.nodes().iter().flat_map(|n| n.child) {
+            if code == strahl::layout::EMPTY_CHILD || code & strahl::layout::LEAF_BIT == 0 {
+                continue;
+            }
+            let (first, count) = strahl::layout::leaf_packs(code);
+            let mut prims: Vec<u32> = b8.packs()[first..first + count]
+                .iter()
+                .flat_map(|p| (0..8).filter(|&i| p.valid >> i & 1 == 1).map(|i| p.prim[i]))
+                .collect();
+            let all = prims.len();
+            prims.sort_unstable();
+            prims.dedup();
+            assert_eq!(prims.len(), all, "spatial {bins}: a triangle twice in one BVH8 leaf");
+        }
         let tame = |v: Vec3| {
             v.to_array()
                 .iter()
@@ -395,8 +426,20 @@ fn check_spatial(case: &BvhCase, kept: &[Triangle], scene_tame: bool) {
             }
             let what = format!("spatial {bins} ray {i}");
             let want = strahl::traverse::intersect_brute_force::<Watertight, _>(kept, ray);
-            agrees(kept, ray, b2.intersect::<Watertight, _>(tris, ray), want, &format!("{what} bvh2"));
-            agrees(kept, ray, b8.intersect::<Watertight>(ray), want, &format!("{what} bvh8"));
+            agrees(
+                kept,
+                ray,
+                b2.intersect::<Watertight, _>(tris, ray),
+                want,
+                &format!("{what} bvh2"),
+            );
+            agrees(
+                kept,
+                ray,
+                b8.intersect::<Watertight>(ray),
+                want,
+                &format!("{what} bvh8"),
+            );
             let occ = strahl::traverse::occluded_brute_force::<Watertight, _>(kept, ray);
             assert_eq!(b8.occluded::<Watertight>(ray), occ, "{what} bvh8 occluded");
         }
