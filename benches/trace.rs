@@ -18,7 +18,9 @@
 //! over the spatial-split tree (`Bvh2::build_spatial`, default knobs); its peer is
 //! `embree_high_*`, Embree's scene at `RTC_BUILD_QUALITY_HIGH` (its spatial-split build).
 //!
-//! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree).
+//! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree). With
+//! `STRAHL_SHADOW_SPLIT=1` the shadow rays also run as two more kinds, `shadow_blocked` and
+//! `shadow_free` (split by the BVH8's answer).
 
 #[path = "common/mod.rs"]
 mod common;
@@ -332,11 +334,20 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
     let c = build(tris);
     let b = bounds(&c.tris);
     let scale = (b.max - b.min).length();
-    let kinds: [(&str, Vec<Ray>, bool); 3] = [
+    let mut kinds: Vec<(&str, Vec<Ray>, bool)> = vec![
         ("primary", primary_rays(&b, 1024, 1024, TileShape::X4_2), false),
         ("diffuse", diffuse_rays(&c.tris, 1 << 18, scale), false),
         ("shadow", shadow_rays(&c.tris, &b, 1 << 18, scale), true),
     ];
+    // With `STRAHL_SHADOW_SPLIT=1`, the shadow rays again in two kinds, those that are blocked
+    // and those that are not (by the BVH8's answer): where a tracer's time goes.
+    if std::env::var("STRAHL_SHADOW_SPLIT").is_ok_and(|v| v == "1") {
+        let shadow = kinds[2].1.clone();
+        let (blocked, free): (Vec<Ray>, Vec<Ray>) = shadow.iter().partition(|r| c.bvh8.occluded::<Moller>(r));
+        println!("shadow rays: {} blocked, {} free", blocked.len(), free.len());
+        kinds.push(("shadow_blocked", blocked, true));
+        kinds.push(("shadow_free", free, true));
+    }
     #[cfg(feature = "embree")]
     let device = peers::embree::Device::single_threaded();
     #[cfg(feature = "embree")]
