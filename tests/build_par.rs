@@ -345,6 +345,23 @@ fn other_parameters_and_thread_counts() {
             ..BuildParams::hybrid_sah()
         },
     ));
+    list.push((
+        "agglomerative treelets",
+        BuildParams {
+            refine: Refine::AgglomerativeTreelets(TreeletParams {
+                rounds: 3,
+                ..TreeletParams::agglomerative()
+            }),
+            ..fast
+        },
+    ));
+    list.push((
+        "treelets after binning",
+        BuildParams {
+            refine: Refine::Treelets(TreeletParams::new()),
+            ..fast
+        },
+    ));
     for (bits, cluster) in [
         (MortonBits::Bits63, 1),
         (MortonBits::Bits30, 5000),

@@ -254,7 +254,8 @@ impl Builder {
         if let (Refine::Treelets(t) | Refine::AgglomerativeTreelets(t), true) = (params.refine, n > 0) {
             let agglomerative = matches!(params.refine, Refine::AgglomerativeTreelets(_));
             // NOTE: a tree just built is well formed; the pass cannot fail on it.
-            if let Ok(r) = treelet::optimize_with(out, &t, agglomerative, params.max_depth, &mut self.treelet) {
+            if let Ok(r) = treelet::optimize_with(out, &t, agglomerative, params.max_depth, &mut self.treelet, threads)
+            {
                 stats.max_depth = r.max_depth;
                 stats.restructured = r.restructured;
             }
@@ -313,7 +314,7 @@ impl Builder {
         max_depth: u32,
     ) -> Result<TreeletStats, ValidateError> {
         let max_depth = max_depth.min(crate::traverse::MAX_DEPTH);
-        treelet::optimize_with(bvh, params, true, max_depth, &mut self.treelet)
+        treelet::optimize_with(bvh, params, true, max_depth, &mut self.treelet, 1)
     }
 
     /// [`Bvh2::optimize_reinsertion`] with this builder's memory (kept for the next call).

@@ -162,11 +162,11 @@ fn par_round(_: &mut Bvh2, _: &mut [u32], _: &mut [u32], _: u32, _: usize) -> Op
 
 /// Trees with fewer nodes are rotated on one thread.
 #[cfg(feature = "std")]
-const PAR_MIN_NODES: usize = 1 << 15;
+pub(crate) const PAR_MIN_NODES: usize = 1 << 15;
 
 /// A run: `[node, first, end]`, slots `first..end` meant to hold exactly `node`'s descendants.
 #[cfg(feature = "std")]
-type Run = [u32; 3];
+pub(crate) type Run = [u32; 3];
 
 /// The cut for [`optimize_par`], read off the layout without reading the runs: the builders put
 /// a node's children in a pair of slots and every subtree's nodes below them in a run of slots of
@@ -178,7 +178,7 @@ type Run = [u32; 3];
 /// not so (children before their parent, out of range, runs overlapping) or there are fewer than
 /// two runs. [`check_runs`] then checks that every run holds what it should.
 #[cfg(feature = "std")]
-fn plan_runs(bvh: &Bvh2, threads: usize, depth: &mut [u32]) -> Option<(Vec<Run>, Vec<u32>)> {
+pub(crate) fn plan_runs(bvh: &Bvh2, threads: usize, depth: &mut [u32]) -> Option<(Vec<Run>, Vec<u32>)> {
     use alloc::collections::{BTreeSet, BinaryHeap};
     let nodes = &bvh.nodes;
     let n = nodes.len() as u32;
@@ -297,7 +297,7 @@ fn plan_runs(bvh: &Bvh2, threads: usize, depth: &mut [u32]) -> Option<(Vec<Run>,
 /// Checks, side by side, that each run `[node, first, end]` holds exactly `node`'s descendants,
 /// each reached once (children after their parents, within the run), and writes their depths.
 #[cfg(feature = "std")]
-fn check_runs(bvh: &Bvh2, runs: &[Run], depth: &mut [u32], threads: usize) -> bool {
+pub(crate) fn check_runs(bvh: &Bvh2, runs: &[Run], depth: &mut [u32], threads: usize) -> bool {
     use core::sync::atomic::{AtomicBool, Ordering};
     let nodes = &bvh.nodes[..];
     let roots: Vec<u32> = runs.iter().map(|r| depth[r[0] as usize]).collect();

@@ -32,8 +32,13 @@
 //!    `n - 1` pairs, so siblings stay adjacent and the node count and leaf order are unchanged; a
 //!    moved treelet leaf is one 32-byte copy (its own children stay where they are).
 //!
-//! Unlike Karras, leaves are never merged or split (the primitive-index array stays as it is),
-//! and the pass is single-threaded: see [`TreeletParams`] for the cost and the knobs.
+//! Unlike Karras, leaves are never merged or split (the primitive-index array stays as it is).
+//! In a parallel build ([`Builder::build_into_par`](super::Builder::build_into_par)) a round
+//! runs on several threads where the tree's layout can be cut into runs of slots that each hold
+//! one subtree (the top-down builders' layout; the rotations' cut): the runs side by side, then
+//! the nodes above them, the same tree slot for slot (a treelet reads and writes only below its
+//! root). Elsewhere it is single-threaded: see [`TreeletParams`] for the cost and the knobs.
+//! [`Bvh2::optimize_treelets_agglomerative`] is the agglomerative variant (ATRBVH).
 
 use super::prims::Box8;
 use super::validate::{Walk, checked_pre_order};
@@ -45,6 +50,28 @@ pub(crate) const MAX_TREELET_LEAVES: usize = 8;
 /// Most leaves of an agglomerative treelet (ATRBVH).
 pub(crate) const MAX_AGGLOMERATIVE_LEAVES: usize = 16;
 const SUBSETS: usize = 1 << MAX_TREELET_LEAVES;
+
+/// Slots `off..` of an array (the tree's nodes, or what the pass knows of them), indexed by slot:
+/// the whole tree (`off` 0), or one run of a subtree's slots on a worker thread.
+pub(crate) struct At<'a, T> {
+    s: &'a mut [T],
+    off: usize,
+}
+
+impl<T> core::ops::Index<usize> for At<'_, T> {
+    type Output = T;
+    #[inline(always)]
+    fn index(&self, i: usize) -> &T {
+        &self.s[i - self.off]
+    }
+}
+
+impl<T> core::ops::IndexMut<usize> for At<'_, T> {
+    #[inline(always)]
+    fn index_mut(&mut self, i: usize) -> &mut T {
+        &mut self.s[i - self.off]
+    }
+}
 
 /// What the pass knows of a node: primitives below it (saturating), depth (root = 1) and height
 /// (leaf = 1), both saturating at 255 (an over-estimate only makes the depth check stricter).
@@ -98,7 +125,7 @@ pub(crate) fn optimize(
     max_depth: u32,
     s: &mut TreeletScratch,
 ) -> Result<TreeletStats, ValidateError> {
-    optimize_with(bvh, tp, false, max_depth, s)
+    optimize_with(bvh, tp, false, max_depth, s, 1)
 }
 
 /// [`optimize`], or with `agglomerative` the agglomerative variant (ATRBVH).
@@ -108,6 +135,7 @@ pub(crate) fn optimize_with(
     agglomerative: bool,
     max_depth: u32,
     s: &mut TreeletScratch,
+    threads: usize,
 ) -> Result<TreeletStats, ValidateError> {
     let mut stats = TreeletStats::default();
     let most = if agglomerative {
@@ -116,13 +144,7 @@ pub(crate) fn optimize_with(
         MAX_TREELET_LEAVES
     };
     let leaves = (tp.leaves as usize).clamp(2, most);
-    let mut t = Tables {
-        boxes: [Box8::EMPTY; SUBSETS],
-        cost: [0.0; SUBSETS],
-        part: [0; SUBSETS],
-        height: [0; SUBSETS],
-        prims: [0; SUBSETS],
-    };
+    let mut t = tables();
     // The documented range (`1 ..= 16`) holds here too: this is also reached without
     // `BuildParams::check`, through `Bvh2::optimize_treelets`.
     let mut before = u32::MAX;
@@ -135,31 +157,27 @@ pub(crate) fn optimize_with(
         // NOTE: checked every round, not only the first: one linear walk beside a round of
         // treelet searches.
         pre_order(&bvh.nodes, bvh.prim_indices.len(), s)?;
-        let nodes = &mut bvh.nodes;
+        let pass = Pass {
+            min_prims: tp.min_prims,
+            leaves,
+            agglomerative,
+            max_depth,
+        };
+        if let Some((treelets, restructured)) = par_round(bvh, &mut s.info, &pass, threads) {
+            stats.treelets += treelets;
+            stats.restructured += restructured;
+            continue;
+        }
         let TreeletScratch { walk, info } = s;
+        let mut nodes = At {
+            s: &mut bvh.nodes,
+            off: 0,
+        };
+        let mut info = At { s: info, off: 0 };
         for &r in walk.order.iter().rev() {
-            let node = nodes[r as usize];
-            if node.is_leaf() {
-                info[r as usize].prims = node.count;
-                info[r as usize].height = 1;
-                continue;
-            }
-            let l = node.left() as usize;
-            let (a, b) = (info[l], info[l + 1]);
-            let ir = &mut info[r as usize];
-            ir.prims = a.prims.saturating_add(b.prims);
-            ir.height = a.height.max(b.height).saturating_add(1);
-            if ir.prims >= tp.min_prims && leaves >= 3 {
-                stats.treelets += 1;
-                let changed = match form(nodes, r, leaves) {
-                    None => false,
-                    Some(tl) if agglomerative => agglomerate(nodes, info, r, &tl, max_depth),
-                    Some(tl) => restructure(nodes, info, r, &tl, max_depth, &mut t),
-                };
-                if changed {
-                    stats.restructured += 1;
-                }
-            }
+            let (treelet, changed) = pass.visit(&mut nodes, &mut info, r, &mut t);
+            stats.treelets += u32::from(treelet);
+            stats.restructured += u32::from(changed);
         }
     }
     stats.max_depth = match bvh.nodes.first() {
@@ -167,6 +185,117 @@ pub(crate) fn optimize_with(
         None => 0,
     };
     Ok(stats)
+}
+
+/// One round's settings.
+struct Pass {
+    min_prims: u32,
+    leaves: usize,
+    agglomerative: bool,
+    max_depth: u32,
+}
+
+impl Pass {
+    /// Node `r`, after every node below it: what the pass knows of it from its children, and its
+    /// treelet restructured where that pays. (treelet formed, tree changed).
+    #[inline]
+    fn visit(&self, nodes: &mut At<'_, Node>, info: &mut At<'_, NodeInfo>, r: u32, t: &mut Tables) -> (bool, bool) {
+        let node = nodes[r as usize];
+        if node.is_leaf() {
+            info[r as usize].prims = node.count;
+            info[r as usize].height = 1;
+            return (false, false);
+        }
+        let l = node.left() as usize;
+        let (a, b) = (info[l], info[l + 1]);
+        let ir = &mut info[r as usize];
+        ir.prims = a.prims.saturating_add(b.prims);
+        ir.height = a.height.max(b.height).saturating_add(1);
+        if ir.prims < self.min_prims || self.leaves < 3 {
+            return (false, false);
+        }
+        let changed = match form(nodes, r, self.leaves) {
+            None => false,
+            Some(tl) if self.agglomerative => agglomerate(nodes, info, r, &tl, self.max_depth),
+            Some(tl) => restructure(nodes, info, r, &tl, self.max_depth, t),
+        };
+        (true, changed)
+    }
+}
+
+/// The dynamic program's tables, empty.
+fn tables() -> Tables {
+    Tables {
+        boxes: [Box8::EMPTY; SUBSETS],
+        cost: [0.0; SUBSETS],
+        part: [0; SUBSETS],
+        height: [0; SUBSETS],
+        prims: [0; SUBSETS],
+    }
+}
+
+/// One round on up to `threads` threads (`std`), or `None` (nothing done) where the tree cannot
+/// be cut: the cut of the parallel rotations ([`rotate::plan_runs`](super::rotate), runs of slots
+/// that hold all the descendants of one node and nothing else, checked), each run's nodes visited
+/// bottom-up (in reverse slot order: every node after its descendants) side by side, then the
+/// nodes above the runs on this thread. A treelet reads and writes only below the node it is
+/// at, so this is the sequential round's tree, slot for slot. `info` holds the depths of the
+/// round's pre-order walk.
+#[cfg(feature = "std")]
+fn par_round(bvh: &mut Bvh2, info: &mut [NodeInfo], pass: &Pass, threads: usize) -> Option<(u32, u32)> {
+    use super::rotate;
+    use core::sync::atomic::{AtomicU32, Ordering};
+    if threads <= 1 || bvh.nodes.len() < rotate::PAR_MIN_NODES {
+        return None;
+    }
+    let mut depth = alloc::vec![0u32; bvh.nodes.len()];
+    let (runs, top) = rotate::plan_runs(bvh, threads, &mut depth)?;
+    if !rotate::check_runs(bvh, &runs, &mut depth, threads) {
+        return None;
+    }
+    let ranges = || runs.iter().map(|r| (r[1] as usize, r[2] as usize));
+    let (treelets, restructured) = (AtomicU32::new(0), AtomicU32::new(0));
+    {
+        let parts = crate::par::split_ranges(&mut bvh.nodes, ranges());
+        let mut jobs: Vec<_> = ranges()
+            .zip(parts)
+            .zip(crate::par::split_ranges(info, ranges()))
+            .collect();
+        // Largest runs first.
+        jobs.sort_unstable_by_key(|((r, _), _)| core::cmp::Reverse(r.1 - r.0));
+        crate::par::each_job(jobs, threads, |(((first, end), nodes), info)| {
+            let mut t = tables();
+            let (mut tl, mut ch) = (0, 0);
+            let mut nodes = At { s: nodes, off: first };
+            let mut info = At { s: info, off: first };
+            for r in (first..end).rev() {
+                let (a, b) = pass.visit(&mut nodes, &mut info, r as u32, &mut t);
+                tl += u32::from(a);
+                ch += u32::from(b);
+            }
+            treelets.fetch_add(tl, Ordering::Relaxed);
+            restructured.fetch_add(ch, Ordering::Relaxed);
+        });
+    }
+    let (mut tl, mut ch) = (treelets.into_inner(), restructured.into_inner());
+    let mut t = tables();
+    let mut nodes = At {
+        s: &mut bvh.nodes,
+        off: 0,
+    };
+    let mut info = At { s: info, off: 0 };
+    for &r in top.iter().rev() {
+        let (a, b) = pass.visit(&mut nodes, &mut info, r, &mut t);
+        tl += u32::from(a);
+        ch += u32::from(b);
+    }
+    Some((tl, ch))
+}
+
+/// Without `std`: every round on one thread.
+#[cfg(not(feature = "std"))]
+fn par_round(_: &mut Bvh2, _: &mut [NodeInfo], _: &Pass, _: usize) -> Option<(u32, u32)> {
+    None
 }
 
 /// Pre-order from the root into `s.walk.order` ([`checked_pre_order`]: the tree may come from
@@ -198,7 +327,7 @@ struct Treelet {
 /// Forms the treelet at interior node `r`: expands the largest-area interior leaf until there are
 /// `max_leaves` leaves (or none is interior). `None` for fewer than 3 leaves or a box that is not
 /// finite anywhere in it (left alone).
-fn form(nodes: &[Node], r: u32, max_leaves: usize) -> Option<Treelet> {
+fn form(nodes: &At<'_, Node>, r: u32, max_leaves: usize) -> Option<Treelet> {
     let max_leaves = max_leaves.min(MAX_AGGLOMERATIVE_LEAVES);
     let mut leaf = [0u32; MAX_AGGLOMERATIVE_LEAVES];
     let mut area = [0f32; MAX_AGGLOMERATIVE_LEAVES];
@@ -250,8 +379,8 @@ fn form(nodes: &[Node], r: u32, max_leaves: usize) -> Option<Treelet> {
 /// Finds the best topology of treelet `tl` (at `r`) by dynamic programming over its leaf subsets
 /// and writes it if it is cheaper and within the depth bound. Returns `true` if the tree changed.
 fn restructure(
-    nodes: &mut [Node],
-    info: &mut [NodeInfo],
+    nodes: &mut At<'_, Node>,
+    info: &mut At<'_, NodeInfo>,
     r: u32,
     tl: &Treelet,
     max_depth: u32,
@@ -374,7 +503,7 @@ fn restructure(
 // NOTE: the distance matrix is read and written by row and by column at once; index loops say so
 // more plainly than iterators.
 #[allow(clippy::needless_range_loop)]
-fn agglomerate(nodes: &mut [Node], info: &mut [NodeInfo], r: u32, tl: &Treelet, max_depth: u32) -> bool {
+fn agglomerate(nodes: &mut At<'_, Node>, info: &mut At<'_, NodeInfo>, r: u32, tl: &Treelet, max_depth: u32) -> bool {
     const M: usize = MAX_AGGLOMERATIVE_LEAVES;
     let Treelet {
         leaf,
@@ -645,7 +774,7 @@ mod tests {
     #[test]
     fn agglomerative_edge_cases() {
         let p = TreeletParams::agglomerative();
-        let run = |b: &mut Bvh2, depth| optimize_with(b, &p, true, depth, &mut TreeletScratch::default()).unwrap();
+        let run = |b: &mut Bvh2, depth| optimize_with(b, &p, true, depth, &mut TreeletScratch::default(), 1).unwrap();
         for (xs, restructured, want) in [
             ([0.0, 0.2, 10.0, 10.2], 1, [vec![0, 1], vec![2, 3]]),
             ([0.0, 10.0, 0.2, 10.2], 0, [vec![0, 2], vec![1, 3]]),
