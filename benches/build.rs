@@ -1103,6 +1103,13 @@ fn build_threads(c: &mut Criterion) {
         ("high", BuildParams::high()),
         ("hybrid_sah", BuildParams::hybrid_sah()),
         ("median", BuildParams::median()),
+        (
+            "fast+agglomerative treelets",
+            BuildParams {
+                refine: Refine::AgglomerativeTreelets(TreeletParams::agglomerative()),
+                ..BuildParams::fast()
+            },
+        ),
     ];
     for (name, p) in presets {
         let mut builder = Builder::new();

@@ -5,7 +5,8 @@
 //! sets the soup size (`scene::thin_soup(n, 1)`, default 2^20); `STRAHL_ONLY` a comma-separated
 //! list of builders (`fastest`, `lbvh63`, `fast`, `fast_exact` (`fast()` binning every reference),
 //! `balanced_exact` (`balanced()` binning every reference), `binned8all`, `balanced`, `high`, `median`, `quality`,
-//! `hlbvh`, `hybrid_sah`, `*_reinsert` (`balanced`, `high`, `fastest` with [`ReinsertParams::new`]); `*_normalized`: the Morton builders on the classic per-axis grid,
+//! `hlbvh`, `hybrid_sah`, `fast_treelets` (`fast()` + TRBVH treelets of 7), `fast_atrbvh`,
+//! `fastest_atrbvh` (+ [`TreeletParams::agglomerative`]), `*_reinsert` (`balanced`, `high`, `fastest` with [`ReinsertParams::new`]); `*_normalized`: the Morton builders on the classic per-axis grid,
 //! [`MortonCells::Normalized`]). `STRAHL_SCENE` picks the scene: `soup` (default), `terrain`
 //! (`scene::terrain(724, 1)`, 1M triangles, 5:1 flat), `sphereflake` (`scene::sphereflake(3, 3)`)
 //! or `bunny`. `STRAHL_THREADS=t` (t > 1) also times `Builder::build_into_par` on `t`
@@ -16,7 +17,9 @@
 //! the presets.
 
 use std::time::Instant;
-use strahl::build::{BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy};
+use strahl::build::{
+    BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy, TreeletParams,
+};
 use strahl::scene;
 
 #[test]
@@ -81,6 +84,27 @@ fn speed() {
         ("balanced", BuildParams::balanced()),
         ("high", BuildParams::high()),
         ("hybrid_sah", BuildParams::hybrid_sah()),
+        (
+            "fast_treelets",
+            BuildParams {
+                refine: Refine::Treelets(TreeletParams::new()),
+                ..BuildParams::fast()
+            },
+        ),
+        (
+            "fast_atrbvh",
+            BuildParams {
+                refine: Refine::AgglomerativeTreelets(TreeletParams::agglomerative()),
+                ..BuildParams::fast()
+            },
+        ),
+        (
+            "fastest_atrbvh",
+            BuildParams {
+                refine: Refine::AgglomerativeTreelets(TreeletParams::agglomerative()),
+                ..BuildParams::fastest()
+            },
+        ),
         (
             "balanced_reinsert",
             BuildParams {

@@ -6,7 +6,9 @@
 
 mod common;
 
-use strahl::build::{BuildError, BuildParams, Bvh2, SpatialSplits, ValidateError};
+use strahl::build::{
+    BuildError, BuildParams, Bvh2, Refine, ReinsertParams, SpatialSplits, TreeletParams, ValidateError,
+};
 use strahl::geometry::{Hit, Triangle};
 use strahl::layout::{Bvh4, Bvh8};
 use strahl::scene::{self, Rng};
@@ -411,6 +413,30 @@ fn far_triangles_and_overflowing_clips() {
     }
 }
 
+/// A balanced tree whose leaves have `boxes` and each reference triangle 0.
+fn balanced_tree(boxes: &[Aabb]) -> Bvh2 {
+    use strahl::build::Node;
+    let mut nodes = vec![Node::leaf(&Aabb::EMPTY, 0, 1)];
+    // (slot, boxes' range): a node, then its two children adjacent.
+    let mut todo = vec![(0usize, 0usize, boxes.len())];
+    while let Some((at, lo, hi)) = todo.pop() {
+        let b = boxes[lo..hi].iter().fold(Aabb::EMPTY, |a, x| a.union(x));
+        if hi - lo == 1 {
+            nodes[at] = Node::leaf(&b, lo as u32, 1);
+            continue;
+        }
+        let l = nodes.len();
+        nodes.extend([Node::leaf(&b, 0, 1); 2]);
+        nodes[at] = Node::interior(&b, l as u32);
+        let mid = (lo + hi) / 2;
+        todo.extend([(l, lo, mid), (l + 1, mid, hi)]);
+    }
+    Bvh2 {
+        nodes,
+        prim_indices: vec![0; boxes.len()],
+    }
+}
+
 /// `validate_split` checks that the leaves' boxes cover all of each triangle, not only its
 /// corners: two leaves holding a triangle's ends but not a strip across its middle fail, boxes
 /// meeting exactly (or overlapping) pass, and one f32 ulp of gap fails.
@@ -442,6 +468,44 @@ fn validate_split_sees_a_gap_inside_a_triangle() {
     );
     assert_eq!(tree(0.4).validate_split(&tris[..]).unwrap().primitives, 1);
     assert_eq!(tree(0.3).validate_split(&tris[..]).unwrap().primitives, 1);
+    // A left box reaching far away (to -1e30) does not hide the strip: the tolerance is the
+    // triangle's own scale.
+    let mut far = tree(0.6);
+    let wide = Aabb::new(Vec3::splat(-1e30), Vec3::new(0.4, 1.0, 0.0));
+    far.nodes[1] = Node::leaf(&wide, 0, 1);
+    far.nodes[0] = Node::interior(&wide.union(&far.nodes[2].aabb()), 1);
+    assert_eq!(
+        far.validate_split(&tris[..]).unwrap_err(),
+        ValidateError::PrimNotCovered { prim: 0 }
+    );
+    // Nor do many boxes that touch the triangle's box but not the triangle: 500 strips covering
+    // half of each band of y, then 2,000 leaves in the corner x, y > 0.9 (they used to cut the
+    // gaps into pieces until the check gave up and passed).
+    let mut boxes = Vec::new();
+    for i in 0..500 {
+        let y0 = i as f32 / 500.0;
+        boxes.push(Aabb::new(Vec3::new(0.0, y0, 0.0), Vec3::new(1.0, y0 + 0.001, 0.0)));
+    }
+    boxes.push(Aabb::new(Vec3::new(0.0, 0.99, 0.0), Vec3::new(0.01, 1.0, 0.0))); // vertex 2
+    boxes.extend([Aabb::new(Vec3::new(0.9, 0.9, 0.0), Vec3::new(1.0, 1.0, 0.0)); 2_000]);
+    assert_eq!(
+        balanced_tree(&boxes).validate_split(&tris[..]).unwrap_err(),
+        ValidateError::PrimNotCovered { prim: 0 }
+    );
+    // A triangle cut into 6,000 strips in shuffled order, all covered, passes.
+    let mut bands: Vec<usize> = (0..6_000).collect();
+    let mut r = Rng::new(1);
+    for i in (1..bands.len()).rev() {
+        bands.swap(i, (r.u64() % (i as u64 + 1)) as usize);
+    }
+    let strips: Vec<Aabb> = bands
+        .iter()
+        .map(|&i| {
+            let (y0, y1) = (i as f32 / 6_000.0, (i + 1) as f32 / 6_000.0);
+            Aabb::new(Vec3::new(0.0, y0, 0.0), Vec3::new(1.0, y1, 0.0))
+        })
+        .collect();
+    assert_eq!(balanced_tree(&strips).validate_split(&tris[..]).unwrap().primitives, 1);
     // A right box one ulp too low in y misses the triangle's sliver above it near x = 0.4.
     let mut t = tree(0.4);
     let short = Aabb::new(Vec3::new(0.4, 0.0, 0.0), Vec3::new(1.0, 0.6f32.next_down(), 0.0));
@@ -470,30 +534,60 @@ fn canonical(b: &Bvh2) -> Vec<(Aabb, Option<Vec<u32>>)> {
     out
 }
 
-/// `build_spatial_par` builds the sequential build's tree (node for node, in pre-order) on any
-/// thread count, with the same statistics; bad input and bad knobs get the same answers.
+/// `build_spatial_par` builds the sequential build's tree (equal nodes and slots, so the same
+/// tree in pre-order) on any thread count, with the same statistics, also with each refinement
+/// pass after it (reinsertion depends on the numbering) and with forced splits (a deep series
+/// under a depth bound); bad input, bad knobs and absurd thread counts get the same answers.
 #[test]
 fn parallel_build_is_the_same_tree() {
     let mut big = scene::thin_soup(30_000, 4);
     big.extend(scene::sphereflake(2, 3).to_soup());
     big.push([Vec3::ZERO, Vec3::X, Vec3::NAN]); // left out, counted
+    let mut deep = scene::thin_soup(12_000, 5);
+    deep.extend((0..120).map(|i| {
+        let x = 0.5f32.powi(i);
+        [Vec3::new(x, 0.0, 0.0), Vec3::new(x, x, 0.0), Vec3::new(x, 0.0, x)]
+    }));
     let mut list = scenes();
     list.push(("thin soup and sphereflake", big));
     list.push(("empty", vec![]));
     list.push(("one", vec![[Vec3::ZERO, Vec3::X, Vec3::Y]]));
-    for (name, tris) in list {
+    let base = BuildParams::default();
+    let mut cases: Vec<(String, Vec<Triangle>, BuildParams)> =
+        list.into_iter().map(|(n, t)| (n.to_string(), t, base)).collect();
+    let refined = [
+        ("rotations", Refine::Rotations(2)),
+        ("treelets", Refine::Treelets(TreeletParams::new())),
+        (
+            "agglomerative",
+            Refine::AgglomerativeTreelets(TreeletParams::agglomerative()),
+        ),
+        ("reinsertion", Refine::Reinsertion(ReinsertParams::new())),
+    ];
+    for (name, refine) in refined {
+        let p = BuildParams {
+            refine,
+            max_depth: 34,
+            ..base
+        };
+        cases.push((format!("deep/{name}"), deep.clone(), p));
+    }
+    for (name, tris, p) in cases {
         for (kname, sp) in [("default", SpatialSplits::default()), ("eager", EAGER)] {
             let what = format!("{name}/{kname}");
-            let (one, s1) = Bvh2::build_spatial(&tris[..], &BuildParams::default(), &sp).unwrap();
+            let (one, s1) = Bvh2::build_spatial(&tris[..], &p, &sp).unwrap();
             let want = canonical(&one);
-            for threads in [0, 1, 2, 3, 8] {
-                let (par, sp_stats) =
-                    Bvh2::build_spatial_par(&tris[..], &BuildParams::default(), &sp, threads).unwrap();
+            if name.starts_with("deep") {
+                assert!(s1.forced_splits > 0, "{what}: no forced split");
+            }
+            for threads in [0, 1, 2, 3, 8, usize::MAX] {
+                let (par, sp_stats) = Bvh2::build_spatial_par(&tris[..], &p, &sp, threads).unwrap();
                 if !tris.is_empty() {
                     par.validate_split(&tris[..])
                         .unwrap_or_else(|e| panic!("{what} x{threads}: {e}"));
                 }
                 assert!(canonical(&par) == want, "{what} x{threads}: another tree");
+                assert!(par == one, "{what} x{threads}: numbered differently");
                 assert_eq!(sp_stats, s1, "{what} x{threads}");
             }
         }

@@ -336,11 +336,13 @@ impl Bvh2 {
         })
     }
 
-    /// [`build_spatial`](Self::build_spatial) on `threads` threads (feature `std`): the same
-    /// tree, numbered differently. The top of the tree is built on the calling thread until the
-    /// tasks are small enough to share out; each subtree below is then built by one worker (its
-    /// share of the reference budget is its own, so the order does not matter) and the parts
-    /// are joined. `threads <= 1` is the sequential build.
+    /// [`build_spatial`](Self::build_spatial) on `threads` threads (feature `std`; at most
+    /// [`MAX_THREADS`](super::MAX_THREADS)): the same tree, node for node and slot for slot (so
+    /// `params.refine` finds the same tree too). The top of the tree is split in rounds, every
+    /// large task once per round, the tasks side by side; then each subtree below is built whole
+    /// by one worker (its share of the reference budget is its own, so the order does not
+    /// matter); the parts are joined and numbered as the sequential build numbers them.
+    /// `threads <= 1` is the sequential build.
     ///
     /// ```
     /// use strahl::build::{BuildParams, Bvh2, SpatialSplits};
@@ -349,8 +351,7 @@ impl Bvh2 {
     /// let (one, _) = Bvh2::build_spatial(&soup[..], &p, &sp).unwrap();
     /// let (four, _) = Bvh2::build_spatial_par(&soup[..], &p, &sp, 4).unwrap();
     /// four.validate_split(&soup[..]).unwrap();
-    /// assert_eq!(four.prim_indices.len(), one.prim_indices.len());
-    /// assert_eq!(four.sah_cost(1.0, 1.0), one.sah_cost(1.0, 1.0));
+    /// assert_eq!(four, one);
     /// ```
     #[cfg(feature = "std")]
     pub fn build_spatial_par<P: Triangles + Sync + ?Sized>(
@@ -359,6 +360,7 @@ impl Bvh2 {
         splits: &SpatialSplits,
         threads: usize,
     ) -> Result<(Bvh2, BuildStats), BuildError> {
+        let threads = threads.clamp(1, super::MAX_THREADS);
         spatial_build(tris, params, splits, |cx, root, mut buf, out, stats| {
             if threads > 1 {
                 par::run(cx, root, buf, threads, out, stats);
@@ -897,7 +899,7 @@ mod par {
     /// Builds the tree below `root` (node 0 of `out`) in rounds: each round splits every job
     /// above the grain (`n / (8 threads)` references, at least [`GRAIN_MIN`]) once, the jobs side
     /// by side; then each job's whole subtree, largest first. Every part is moved into `out` in
-    /// job order, so the numbering does not depend on which thread built what.
+    /// job order, and the tree is then numbered as the sequential build numbers it.
     pub(super) fn run<P: Triangles + Sync + ?Sized>(
         cx: &Ctx<'_, P>,
         root: Task,
@@ -921,6 +923,35 @@ mod par {
         for (slot, p) in map_par(jobs, threads, |(t, mut refs)| part(cx, t, &mut refs, false)) {
             join(out, stats, slot, p);
         }
+        *out = sequential_order(out);
+    }
+
+    /// `b` numbered as the sequential build numbers it (children made as a pair when their parent
+    /// is built; the right subtree built first; a leaf's slots taken when it is made), so that
+    /// the trees are equal and numbering-dependent passes (reinsertion) agree.
+    fn sequential_order(b: &Bvh2) -> Bvh2 {
+        let mut out = Bvh2 {
+            nodes: Vec::with_capacity(b.nodes.len()),
+            prim_indices: Vec::with_capacity(b.prim_indices.len()),
+        };
+        out.nodes.push(b.nodes[0]);
+        let mut todo = alloc::vec![(0u32, 0u32)];
+        while let Some((old, new)) = todo.pop() {
+            let n = &b.nodes[old as usize];
+            if n.is_leaf() {
+                let first = out.prim_indices.len() as u32;
+                out.prim_indices.extend_from_slice(&b.prim_indices[n.prim_range()]);
+                out.nodes[new as usize] = Node::leaf(&n.aabb(), first, n.count);
+            } else {
+                let l = out.nodes.len() as u32;
+                out.nodes[new as usize] = Node::interior(&n.aabb(), l);
+                out.nodes.push(b.nodes[n.left() as usize]);
+                out.nodes.push(b.nodes[n.left() as usize + 1]);
+                todo.push((n.left(), l));
+                todo.push((n.left() + 1, l + 1));
+            }
+        }
+        out
     }
 
     /// The part of the tree of job `t` over `refs`: its whole subtree, or with `once` its split

@@ -810,6 +810,15 @@ mod tests {
         assert_eq!(bytemuck::cast_slice::<Node, u8>(&b.nodes), &before[..]);
     }
 
+    /// A topology exactly at the depth bound is taken (the `- 1` in the check).
+    #[test]
+    fn agglomerative_depth_exactly_at_the_bound() {
+        let p = TreeletParams::agglomerative();
+        let mut b = crossed([0.0, 0.2, 10.0, 0.4]);
+        let s = optimize_with(&mut b, &p, true, 4, &mut TreeletScratch::default(), 1).unwrap();
+        assert_eq!((s.restructured > 0, s.max_depth), (true, 4));
+    }
+
     #[test]
     fn depth_bound_rejects_deeper_topologies() {
         // A balanced tree over 4 leaves where a chain would be cheaper: leaves at 0, 0.2, 0.4

@@ -479,21 +479,50 @@ type Polygon = Vec<[f64; 3]>;
 
 /// Whether the boxes together cover every point of triangle `t`, in f64: the parts of `t` outside
 /// each box in turn are cut off, box by box (Sutherland-Hodgman against the six planes), and what
-/// is left must be nothing but slivers on the boxes' faces (at most `1e-12` of the coordinates'
-/// magnitude outside: the clipping's own rounding; the builder pads its boxes by 8 f32 epsilons).
-/// Past 4,096 pieces the answer is `true` (the vertices were checked already), so that no input
-/// makes this slow.
+/// is left must be nothing but slivers on the boxes' faces (at most `1e-12` of the triangle's
+/// coordinates' magnitude outside: the clipping's own rounding; the builder pads its boxes by 8
+/// f32 epsilons). A box that misses a piece leaves it whole. Past 4,096 pieces or 2^22 piece
+/// visits (a few hundred milliseconds) the answer is `true` (the vertices were checked already),
+/// so that no input makes this slower.
 fn covered_by(t: &Triangle, boxes: &[Aabb]) -> bool {
     let mut scale = 0.0f64;
-    for v in t.iter().chain(boxes.iter().flat_map(|b| [&b.min, &b.max])) {
+    for v in t.iter() {
         scale = scale.max(v.abs().max_element() as f64);
     }
     let tol = scale * 1e-12;
     let mut pieces: Vec<Polygon> = vec![t.iter().map(|v| [v.x as f64, v.y as f64, v.z as f64]).collect()];
     let mut next = Vec::new();
+    let mut work = 0usize;
     for b in boxes {
         let (lo, hi) = (b.min.to_array().map(f64::from), b.max.to_array().map(f64::from));
         for mut piece in pieces.drain(..) {
+            work += 1;
+            if work > 1 << 22 {
+                return true;
+            }
+            // A box that misses the piece leaves it whole (no fragments that cover nothing).
+            let misses = (0..3).any(|a| {
+                let (pl, ph) = piece.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                    (l.min(v[a]), h.max(v[a]))
+                });
+                ph < lo[a] || pl > hi[a]
+            });
+            if misses {
+                next.push(piece);
+                continue;
+            }
+            let mut core: Polygon = piece.clone();
+            for a in 0..3 {
+                for (bound, sign) in [(hi[a], 1.0), (lo[a], -1.0)] {
+                    if !core.is_empty() {
+                        core = clip(&core, |v| -(v[a] - bound) * sign);
+                    }
+                }
+            }
+            if core.is_empty() {
+                next.push(piece);
+                continue;
+            }
             // Cut off the part beyond each plane; what stays inside all six is covered by `b`.
             for a in 0..3 {
                 for (bound, sign) in [(hi[a], 1.0), (lo[a], -1.0)] {

@@ -55,9 +55,9 @@ struct Builder<'a, L, const N: usize, P: ?Sized> {
     counts: &'a [u32],
     /// The cost-optimal collapse's table (empty: the greedy collapse).
     plan: &'a Plan,
-    /// More references than triangles (spatial splits): a subtree packed whole may meet a
-    /// triangle twice, and its packs are counted after [`subtree_prims`](Self::subtree_prims)
-    /// drops the repeats.
+    /// Some triangle is referenced twice (spatial splits): a subtree packed whole may meet it
+    /// twice, and its packs are counted after [`subtree_prims`](Self::subtree_prims) drops the
+    /// repeats.
     repeats: bool,
     nodes: Vec<WideNode<L, N>>,
     packs: Vec<TriangleLanes<L, N>>,
@@ -82,7 +82,14 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
             tris,
             counts,
             plan,
-            repeats: bvh.prim_indices.len() > tris.len(),
+            repeats: {
+                // Exact: some triangle referenced twice (invalid triangles can keep the count low).
+                let mut seen = vec![0u64; tris.len().div_ceil(64)];
+                bvh.prim_indices.iter().any(|&p| {
+                    let (w, b) = (p as usize / 64, 1u64 << (p % 64));
+                    seen.get_mut(w).is_some_and(|x| core::mem::replace(x, *x | b) & b != 0)
+                })
+            },
             nodes: Vec::new(),
             packs: Vec::new(),
             #[cfg(feature = "std")]
@@ -207,16 +214,15 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
         }
         // A tree with spatial splits (`Bvh2::build_spatial`) may reference one triangle from
         // several of these leaves: one pack holds it once, so that a hit filter is asked once per
-        // triangle and leaf. Order kept; the subtrees packed here hold at most a few packs.
-        let mut kept = 0;
-        for i in 0..out.len() {
-            let p = out[i];
-            if !out[..kept].contains(&p) {
-                out[kept] = p;
-                kept += 1;
-            }
+        // triangle and leaf.
+        if self.repeats {
+            // First occurrences, order kept, in O(k log k) (a subtree may be large).
+            let mut by: Vec<(u32, usize)> = out.iter().copied().zip(0..).collect();
+            by.sort_unstable();
+            by.dedup_by_key(|x| x.0);
+            by.sort_unstable_by_key(|x| x.1);
+            out = by.into_iter().map(|x| x.0).collect();
         }
-        out.truncate(kept);
         Ok(out)
     }
 
@@ -956,6 +962,36 @@ const PAR_GRAIN: usize = 4096;
 mod tests {
     use super::*;
     use crate::layout::{Bvh4, Bvh8, EMPTY_CHILD, leaf_packs};
+
+    /// `sizes` predicts exactly what `run` makes for spatial-split trees, also where invalid
+    /// triangles keep the references fewer than the triangles (else the parallel collapse
+    /// silently falls back to the sequential one).
+    #[test]
+    fn sizes_exact_on_spatial_trees() {
+        let sp = crate::build::SpatialSplits {
+            alpha: 0.0,
+            max_references: 4.0,
+            bins: 16,
+            min_node_size: 2,
+        };
+        let mut with_invalid = crate::scene::thin_soup(3_000, 4);
+        let n = with_invalid.len();
+        for _ in 0..n {
+            with_invalid.push([glam::Vec3::NAN, glam::Vec3::X, glam::Vec3::Y]);
+        }
+        for (name, tris) in [
+            ("plain", crate::scene::thin_soup(3_000, 4)),
+            ("half invalid", with_invalid),
+        ] {
+            let (b2, _) = Bvh2::build_spatial(&tris[..], &crate::build::BuildParams::default(), &sp).unwrap();
+            let counts = subtree_counts(&b2).unwrap();
+            let plan = Plan::new(&b2, &counts, 8).unwrap();
+            let mut b = Builder::<crate::math::f32x8, 8, _>::new(&b2, &tris[..], &counts, &plan);
+            let want = b.sizes(0).unwrap();
+            b.run(0).unwrap();
+            assert_eq!(want, (b.nodes.len(), b.packs.len()), "{name}");
+        }
+    }
 
     #[test]
     fn every_triangle_lands_in_exactly_one_pack() {
