@@ -386,16 +386,10 @@ fn restructure(
     max_depth: u32,
     t: &mut Tables,
 ) -> bool {
-    let Treelet {
-        leaf,
-        inner,
-        n,
-        old_area,
-    } = *tl;
+    let Treelet { leaf, n, old_area, .. } = *tl;
     if n > MAX_TREELET_LEAVES {
         return false;
     }
-    let mut ni = n - 1;
 
     // Subsets of the leaves, in increasing order: every proper subset of `S` comes before `S`.
     let full = (1usize << n) - 1;
@@ -448,50 +442,17 @@ fn restructure(
         return false;
     }
 
-    // Rewrite: the treelet's sibling pairs, reused for the new topology's pairs.
-    let mut pairs = [0u32; MAX_TREELET_LEAVES];
-    for (p, &i) in pairs.iter_mut().zip(&inner[..ni]) {
-        *p = nodes[i as usize].left();
-    }
-    let mut saved = [<Node as bytemuck::Zeroable>::zeroed(); MAX_TREELET_LEAVES];
-    let mut saved_info = [NodeInfo::default(); MAX_TREELET_LEAVES];
-    for i in 0..n {
-        saved[i] = nodes[leaf[i] as usize];
-        saved_info[i] = info[leaf[i] as usize];
-    }
-    // An explicit stack of (slot, subset); at most n - 1 entries are ever pushed.
-    let mut stack = [(0u32, 0u16); MAX_TREELET_LEAVES];
-    let mut top = 1usize;
-    stack[0] = (r, full as u16);
-    while top > 0 {
-        top -= 1;
-        let (slot, set) = stack[top];
-        let set = set as usize;
-        ni -= 1;
-        let pair = pairs[ni];
-        let sn = &mut nodes[slot as usize];
-        if slot == r {
-            // The root keeps its box (its parent's box holds it).
-            sn.index = pair;
-        } else {
-            *sn = t.boxes[set].to_node(pair, 0);
-        }
-        sn.count = 0;
-        info[slot as usize].prims = t.prims[set];
-        info[slot as usize].height = t.height[set];
+    // Topology nodes are leaf subsets; a one-bit subset is treelet leaf `i`.
+    rewrite(nodes, info, r, tl, full, |set| {
         let p = t.part[set] as usize;
-        for (child, sub) in [(pair, p), (pair + 1, set ^ p)] {
-            if sub & (sub - 1) == 0 {
-                let i = sub.trailing_zeros() as usize;
-                nodes[child as usize] = saved[i];
-                info[child as usize] = saved_info[i];
-            } else {
-                stack[top] = (child, sub as u16);
-                top += 1;
-            }
-        }
-    }
-    debug_assert_eq!(ni, 0);
+        let leaf = |sub: usize| (sub & (sub - 1) == 0).then(|| sub.trailing_zeros() as usize);
+        (
+            t.boxes[set],
+            t.prims[set],
+            t.height[set],
+            [p, set ^ p].map(|sub| (sub, leaf(sub))),
+        )
+    });
     true
 }
 
@@ -505,12 +466,7 @@ fn restructure(
 #[allow(clippy::needless_range_loop)]
 fn agglomerate(nodes: &mut At<'_, Node>, info: &mut At<'_, NodeInfo>, r: u32, tl: &Treelet, max_depth: u32) -> bool {
     const M: usize = MAX_AGGLOMERATIVE_LEAVES;
-    let Treelet {
-        leaf,
-        inner,
-        n,
-        old_area,
-    } = *tl;
+    let Treelet { leaf, n, old_area, .. } = *tl;
     // Clusters `0..n` are the leaves, `n..2n - 1` the merges (the last one the root).
     let mut bx = [Box8::EMPTY; 2 * M];
     let mut height = [0u8; 2 * M];
@@ -578,49 +534,79 @@ fn agglomerate(nodes: &mut At<'_, Node>, info: &mut At<'_, NodeInfo>, r: u32, tl
         return false;
     }
 
-    // Rewrite: the treelet's sibling pairs, reused for the new topology's pairs.
+    // Topology nodes are clusters; cluster `i < n` is treelet leaf `i`.
+    rewrite(nodes, info, r, tl, root, |c| {
+        let (a, b) = kids[c];
+        let leaf = |sub: usize| (sub < n).then_some(sub);
+        (
+            bx[c],
+            prims[c],
+            height[c],
+            [a as usize, b as usize].map(|sub| (sub, leaf(sub))),
+        )
+    });
+    true
+}
+
+/// Writes treelet `tl`'s new topology in place: its `n - 1` sibling pairs reused for the new
+/// topology's pairs, so siblings stay adjacent and the node count is unchanged, and each treelet
+/// leaf moved whole (one 32-byte copy: its own children stay where they are). `node(id)` gives a
+/// topology node's box, primitives, height and children (their ids, and for a treelet leaf its
+/// index); `root` is the id of the topology's root, written at `r` (which keeps its box).
+fn rewrite(
+    nodes: &mut At<'_, Node>,
+    info: &mut At<'_, NodeInfo>,
+    r: u32,
+    tl: &Treelet,
+    root: usize,
+    node: impl Fn(usize) -> (Box8, u32, u8, [(usize, Option<usize>); 2]),
+) {
+    const M: usize = MAX_AGGLOMERATIVE_LEAVES;
+    let n = tl.n;
     let mut pairs = [0u32; M];
-    for (p, &i) in pairs.iter_mut().zip(&inner[..n - 1]) {
+    for (p, &i) in pairs.iter_mut().zip(&tl.inner[..n - 1]) {
         *p = nodes[i as usize].left();
     }
     let mut saved = [<Node as bytemuck::Zeroable>::zeroed(); M];
     let mut saved_info = [NodeInfo::default(); M];
     for i in 0..n {
-        saved[i] = nodes[leaf[i] as usize];
-        saved_info[i] = info[leaf[i] as usize];
+        saved[i] = nodes[tl.leaf[i] as usize];
+        saved_info[i] = info[tl.leaf[i] as usize];
     }
-    let mut stack = [(0u32, 0u8); M];
+    // An explicit stack of (slot, topology node); at most n - 1 entries are ever pushed.
+    let mut stack = [(0u32, 0usize); M];
     let (mut top, mut np) = (1usize, n - 1);
-    stack[0] = (r, root as u8);
+    stack[0] = (r, root);
     while top > 0 {
         top -= 1;
-        let (slot, c) = stack[top];
-        let c = c as usize;
+        let (slot, id) = stack[top];
         np -= 1;
         let pair = pairs[np];
+        let (bx, prims, height, kids) = node(id);
         let sn = &mut nodes[slot as usize];
         if slot == r {
             // The root keeps its box (its parent's box holds it).
             sn.index = pair;
         } else {
-            *sn = bx[c].to_node(pair, 0);
+            *sn = bx.to_node(pair, 0);
         }
         sn.count = 0;
-        info[slot as usize].prims = prims[c];
-        info[slot as usize].height = height[c];
-        let (a, b) = kids[c];
-        for (child, sub) in [(pair, a as usize), (pair + 1, b as usize)] {
-            if sub < n {
-                nodes[child as usize] = saved[sub];
-                info[child as usize] = saved_info[sub];
-            } else {
-                stack[top] = (child, sub as u8);
-                top += 1;
+        info[slot as usize].prims = prims;
+        info[slot as usize].height = height;
+        for (child, (sub, leaf)) in [pair, pair + 1].into_iter().zip(kids) {
+            match leaf {
+                Some(i) => {
+                    nodes[child as usize] = saved[i];
+                    info[child as usize] = saved_info[i];
+                }
+                None => {
+                    stack[top] = (child, sub);
+                    top += 1;
+                }
             }
         }
     }
     debug_assert_eq!(np, 0);
-    true
 }
 
 impl Bvh2 {
