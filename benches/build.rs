@@ -1136,40 +1136,15 @@ fn build_threads(c: &mut Criterion) {
     // every core: the triangles' boxes (computed on the calling thread, as strahl computes them
     // inside the build) and the build, warm (one `RTCBVH` rebuilt).
     #[cfg(feature = "embree")]
-    for threads in [1, cores] {
-        let device = peers::embree::Device::with_threads(threads);
-        let settings = peers::embree::TreeSettings {
-            quality: peers::embree::Quality::Medium,
-            max_leaf: 8,
-            traversal_cost: 1.0,
-            intersection_cost: 1.0,
-        };
-        let mut tree = peers::embree::BuiltTree::new(&device);
-        let mut boxes: Vec<Aabb> = Vec::with_capacity(tris.len());
-        g.bench_function(format!("peer/embree/medium/{threads}"), |b| {
-            b.iter(|| {
-                boxes.clear();
-                boxes.extend(black_box(&tris).iter().map(|t| Aabb::from_points(t)));
-                tree.build(&boxes, &settings);
-            })
-        });
-        drop(tree);
-        if cores == 1 {
-            break;
-        }
-    }
+    embree_on_threads(&mut g, "medium", &tris, peers::embree::Quality::Medium, false, cores);
     // Spatial splits on the 262k thin soup (the 1M one takes seconds a build): strahl's
-    // `build_spatial_par` (the sequential build's tree, checked) and Embree's spatial-split
-    // builder (`high+splits`), each on 1 thread and on every core, cold.
+    // `build_spatial_par` (the sequential build's tree, checked), cold, and Embree's
+    // spatial-split builder (`high+splits`), warm, each on 1 thread and on every core.
     let small = scene::thin_soup(1 << 18, 1);
     let (p, sp) = (BuildParams::default(), SpatialSplits::default());
     let (one, _) = Bvh2::build_spatial(&small[..], &p, &sp).expect("valid params");
     let (many, _) = Bvh2::build_spatial_par(&small[..], &p, &sp, cores).expect("valid params");
-    assert_eq!(
-        one.sah_cost(1.0, 1.0),
-        many.sah_cost(1.0, 1.0),
-        "spatial: parallel tree differs"
-    );
+    assert!(one == many, "spatial: parallel tree differs");
     for threads in [1, cores] {
         g.bench_function(format!("spatial262k/{threads}"), |b| {
             b.iter(|| Bvh2::build_spatial_par(black_box(&small[..]), &p, &sp, threads))
@@ -1179,27 +1154,14 @@ fn build_threads(c: &mut Criterion) {
         }
     }
     #[cfg(feature = "embree")]
-    for threads in [1, cores] {
-        let device = peers::embree::Device::with_threads(threads);
-        let settings = peers::embree::TreeSettings {
-            quality: peers::embree::Quality::High,
-            max_leaf: 8,
-            traversal_cost: 1.0,
-            intersection_cost: 1.0,
-        };
-        let mut boxes: Vec<Aabb> = Vec::with_capacity(small.len());
-        g.bench_function(format!("peer/embree/high+splits262k/{threads}"), |b| {
-            b.iter(|| {
-                let mut tree = peers::embree::BuiltTree::new(&device);
-                boxes.clear();
-                boxes.extend(black_box(&small).iter().map(|t| Aabb::from_points(t)));
-                tree.build_split(&boxes, &small, &settings);
-            })
-        });
-        if cores == 1 {
-            break;
-        }
-    }
+    embree_on_threads(
+        &mut g,
+        "high+splits262k",
+        &small,
+        peers::embree::Quality::High,
+        true,
+        cores,
+    );
     // The cost-optimal BVH8 collapse of the `balanced()` tree, `from_bvh2` against
     // `from_bvh2_par` (whose tree is checked to have as many nodes and packs).
     let (bvh2, _) = Bvh2::build(&tris[..], &BuildParams::balanced()).expect("valid params");
@@ -1218,6 +1180,46 @@ fn build_threads(c: &mut Criterion) {
         });
     }
     g.finish();
+}
+
+/// `peer/embree/<label>/<threads>` members of `g`: Embree's `rtcBuildBVH` at `quality` (with
+/// `split`, its spatial-split builder) on a device with 1 thread and with every core, warm (one
+/// `RTCBVH` rebuilt), the triangles' boxes computed in the timed part as strahl computes them.
+#[cfg(feature = "embree")]
+fn embree_on_threads(
+    g: &mut BenchmarkGroup<'_, WallTime>,
+    label: &str,
+    tris: &[Triangle],
+    quality: peers::embree::Quality,
+    split: bool,
+    cores: usize,
+) {
+    for threads in [1, cores] {
+        let device = peers::embree::Device::with_threads(threads);
+        let settings = peers::embree::TreeSettings {
+            quality,
+            max_leaf: 8,
+            traversal_cost: 1.0,
+            intersection_cost: 1.0,
+        };
+        let mut tree = peers::embree::BuiltTree::new(&device);
+        let mut boxes: Vec<Aabb> = Vec::with_capacity(tris.len());
+        g.bench_function(format!("peer/embree/{label}/{threads}"), |b| {
+            b.iter(|| {
+                boxes.clear();
+                boxes.extend(black_box(tris).iter().map(|t| Aabb::from_points(t)));
+                if split {
+                    tree.build_split(&boxes, tris, &settings);
+                } else {
+                    tree.build(&boxes, &settings);
+                }
+            })
+        });
+        drop(tree);
+        if cores == 1 {
+            break;
+        }
+    }
 }
 
 /// The 1M sphereflake bent by a wave of `amp` times its size: every vertex moves, connectivity
