@@ -511,18 +511,7 @@ fn covered_by(t: &Triangle, boxes: &[Aabb]) -> bool {
                 next.push(piece);
                 continue;
             }
-            let mut core: Polygon = piece.clone();
-            for a in 0..3 {
-                for (bound, sign) in [(hi[a], 1.0), (lo[a], -1.0)] {
-                    if !core.is_empty() {
-                        core = clip(&core, |v| -(v[a] - bound) * sign);
-                    }
-                }
-            }
-            if core.is_empty() {
-                next.push(piece);
-                continue;
-            }
+            let (whole, cut) = (piece.clone(), next.len());
             // Cut off the part beyond each plane; what stays inside all six is covered by `b`.
             for a in 0..3 {
                 for (bound, sign) in [(hi[a], 1.0), (lo[a], -1.0)] {
@@ -542,6 +531,11 @@ fn covered_by(t: &Triangle, boxes: &[Aabb]) -> bool {
                 if piece.is_empty() {
                     break;
                 }
+            }
+            if piece.is_empty() {
+                // Nothing of the piece inside the box: the piece whole, not its fragments.
+                next.truncate(cut);
+                next.push(whole);
             }
         }
         core::mem::swap(&mut pieces, &mut next);
