@@ -17,6 +17,10 @@
 //! strahl's slab test always is; Embree's default trades that for speed). `bvh8_spatial` is BVH8
 //! over the spatial-split tree (`Bvh2::build_spatial`, default knobs); its peer is
 //! `embree_high_*`, Embree's scene at `RTC_BUILD_QUALITY_HIGH` (its spatial-split build).
+//! `bvh8_batch` is the general batch call (`BvhWide::intersect_batch`/`occluded_batch`: packets
+//! of 8 for coherent groups, interleaved walks for scattered rays, decided per group), on streams
+//! of 256 rays; its peer is Embree's stream API, `embree_rtcIntersect1M`/`embree_rtcOccluded1M`
+//! (256 rays a call, the context flagged coherent for the camera rays, incoherent otherwise).
 //!
 //! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree). With
 //! `STRAHL_SHADOW_SPLIT=1` the shadow rays also run as two more kinds, `shadow_blocked` and
@@ -128,6 +132,29 @@ fn run_bvh4(c: &Contenders, rays: &[Ray]) -> usize {
 
 fn run_bvh8(c: &Contenders, rays: &[Ray]) -> usize {
     rays.iter().filter(|r| c.bvh8.intersect::<Moller>(r).is_some()).count()
+}
+
+/// `BvhWide::intersect_batch` (packets for coherent groups of 8, interleaved walks for scattered
+/// ones), called on streams of 256 rays into a buffer on the stack, as the Embree stream member.
+fn run_bvh8_batch(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut hits = [None; 256];
+    rays.chunks(256)
+        .map(|r| {
+            c.bvh8.intersect_batch::<Moller>(r, &mut hits);
+            hits[..r.len()].iter().filter(|h| h.is_some()).count()
+        })
+        .sum()
+}
+
+/// `BvhWide::occluded_batch` on streams of 256 rays, as [`run_bvh8_batch`].
+fn run_bvh8_occluded_batch(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut occ = [false; 256];
+    rays.chunks(256)
+        .map(|r| {
+            c.bvh8.occluded_batch::<Moller>(r, &mut occ);
+            occ[..r.len()].iter().filter(|&&o| o).count()
+        })
+        .sum()
 }
 
 /// BVH8 with a hit filter that accepts every hit (`t` is always finite) but that the compiler
@@ -389,6 +416,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh8_filter_all", run_bvh8_occluded_filter_all),
                 ("bvh8_filter_odd", run_bvh8_occluded_filter_odd),
                 ("bvh8_incoherent", run_bvh8_occluded_incoherent),
+                ("bvh8_batch", run_bvh8_occluded_batch),
                 ("bvh8_reordered", run_bvh8_occluded_reordered),
                 ("packet8_bvh8", run_packet8_occluded),
                 ("bvh_crate", run_bvh_crate_occluded),
@@ -404,6 +432,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh8_filter_all", run_bvh8_filter_all),
                 ("bvh8_filter_odd", run_bvh8_filter_odd),
                 ("bvh8_incoherent", run_bvh8_incoherent),
+                ("bvh8_batch", run_bvh8_batch),
                 ("bvh8_reordered", run_bvh8_reordered),
                 ("packet8_bvh8", run_packet8),
                 ("hybrid8_bvh8", run_hybrid8),
@@ -464,6 +493,19 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
             assert!(
                 got.abs_diff(reference) <= rays.len() / 1000 + 1,
                 "{name}/{kind}: embree hits {got}, bvh2 {reference}"
+            );
+            // The stream API (`rtcIntersect1M`/`rtcOccluded1M`, 256 rays a call), told that camera
+            // rays are coherent and the others are not.
+            let coherent = *kind == "primary";
+            let mut got = 0;
+            if *any_hit {
+                e.occluded1m(rays, coherent, |_, o| got += o as usize);
+            } else {
+                e.intersect1m(rays, coherent, |_, h| got += h.is_some() as usize);
+            }
+            assert!(
+                got.abs_diff(reference) <= rays.len() / 1000 + 1,
+                "{name}/{kind}: embree stream hits {got}, bvh2 {reference}"
             );
             let ef = &embree_filter;
             let got = if *any_hit {
@@ -546,6 +588,13 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 g.bench_function("embree_robust_rtcOccluded1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| er.occluded1(r)).count())
                 });
+                g.bench_function("embree_rtcOccluded1M", |bch| {
+                    bch.iter(|| {
+                        let mut n = 0;
+                        e.occluded1m(black_box(rays), coherent, |_, o| n += o as usize);
+                        n
+                    })
+                });
                 g.bench_function("embree_rtcOccluded1_reordered", |bch| {
                     bch.iter(|| reordered(&|r| e.occluded1(r)))
                 });
@@ -564,6 +613,13 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 });
                 g.bench_function("embree_robust_rtcIntersect1", |bch| {
                     bch.iter(|| black_box(rays).iter().filter(|r| er.intersect1(r).is_some()).count())
+                });
+                g.bench_function("embree_rtcIntersect1M", |bch| {
+                    bch.iter(|| {
+                        let mut n = 0;
+                        e.intersect1m(black_box(rays), coherent, |_, h| n += h.is_some() as usize);
+                        n
+                    })
                 });
                 g.bench_function("embree_rtcIntersect1_reordered", |bch| {
                     bch.iter(|| reordered(&|r| e.intersect1(r).is_some()))

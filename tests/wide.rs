@@ -488,3 +488,107 @@ fn hits_beyond_f32_range_are_misses() {
         assert!(any.iter().all(|&a| a == want.is_some()), "{any:?}, direction {d}");
     }
 }
+
+/// The adaptive batches (`wide::intersect_batch`, `wide::occluded_batch` and the `BvhWide`
+/// methods) answer exactly as one call per ray on batches that mix every kind of group: camera
+/// tiles (packets), rays from one point in every direction (one at a time), rays from scattered
+/// origins (interleaved), NaN and zero-length rays inside otherwise coherent groups, -0.0
+/// components, shortened rays; at every offset (groups straddle the kinds), with outputs
+/// shorter and longer than the rays, through BVH4 and BVH8, Möller, watertight and `Fast`.
+#[test]
+fn adaptive_batches_equal_single_rays() {
+    fn check<T: TriangleTest>(tris: &[Triangle], rays: &[Ray], what: &str) {
+        let (b2, _) = Bvh2::build(tris, &BuildParams::default()).unwrap();
+        let b8 = Bvh8::from_bvh2(&b2, tris).unwrap();
+        let b4 = Bvh4::from_bvh2(&b2, tris).unwrap();
+        for skip in [0, 1, 3, 5, 8] {
+            let rays = &rays[skip.min(rays.len())..];
+            for extra in [0usize, 1] {
+                // One slot more than the rays keeps its value; one fewer drops the last ray.
+                let len = (rays.len() + extra).saturating_sub(1 - extra.min(1));
+                let sentinel = Some(Hit {
+                    t: -7.0,
+                    u: 0.0,
+                    v: 0.0,
+                    prim: 7,
+                });
+                let (mut h8, mut h4) = (vec![sentinel; len], vec![sentinel; len]);
+                b8.intersect_batch::<T>(rays, &mut h8);
+                wide::intersect_batch::<T, _, 4>(b4.view(), rays, &mut h4);
+                let (mut o8, mut o4) = (vec![true; len], vec![true; len]);
+                wide::occluded_batch::<T, _, 8>(b8.view(), rays, &mut o8);
+                b4.occluded_batch::<T>(rays, &mut o4);
+                let n = rays.len().min(len);
+                for (i, r) in rays[..n].iter().enumerate() {
+                    let (hit, occ) = (b8.intersect::<T>(r), b8.occluded::<T>(r));
+                    assert_eq!(h8[i], hit, "{what} skip {skip}: bvh8 ray {i} {r:?}");
+                    assert_eq!(h4[i], b4.intersect::<T>(r), "{what} skip {skip}: bvh4 ray {i} {r:?}");
+                    assert_eq!(o8[i], occ, "{what} skip {skip}: bvh8 occluded ray {i} {r:?}");
+                    assert_eq!(
+                        o4[i],
+                        b4.occluded::<T>(r),
+                        "{what} skip {skip}: bvh4 occluded ray {i} {r:?}"
+                    );
+                }
+                assert!(
+                    h8[n..].iter().chain(&h4[n..]).all(|h| *h == sentinel),
+                    "{what}: wrote past the rays"
+                );
+                assert!(
+                    o8[n..].iter().chain(&o4[n..]).all(|&o| o),
+                    "{what}: wrote past the rays"
+                );
+            }
+        }
+    }
+    for (name, tris) in [
+        ("bunny", scene::bunny().to_soup()),
+        ("random", random_soup(1500, 9)),
+        ("same triangle", vec![[Vec3::ZERO, Vec3::X, Vec3::Y]; 50]),
+    ] {
+        let (lo, hi) = tris
+            .iter()
+            .flatten()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+        let centre = (lo + hi) * 0.5;
+        let mut batch: Vec<Ray> = Vec::new();
+        // Camera tiles of 4 x 2 pixels from one eye (packets).
+        let eye = hi + (hi - lo);
+        for i in 0..64 {
+            let (x, y) = (
+                (i % 4 + 4 * (i / 8 % 4)) as f32 / 16.0,
+                (i / 4 % 2 + 2 * (i / 32)) as f32 / 4.0,
+            );
+            batch.push(Ray::new(eye, lo + (hi - lo) * Vec3::new(x, y, 0.5) - eye));
+        }
+        // Rays from one point in every direction (one at a time).
+        let mut rng = Rng::new(4);
+        batch.extend((0..21).map(|_| Ray::new(centre, rng.unit_vector())));
+        // Scattered origins (interleaved): the mixed rays, with NaN and degenerate ones at the end.
+        batch.extend(rays(&tris, 90, 17));
+        // Coherent tiles again, one with a NaN ray, one with a zero direction, one shortened, one
+        // with -0.0 components.
+        for k in 0..4 {
+            for i in 0..8 {
+                let d = lo + (hi - lo) * Vec3::new(i as f32 / 8.0, 0.4, 0.5) - eye;
+                let mut r = Ray::new(eye, d);
+                if i == 3 {
+                    r = match k {
+                        0 => Ray::new(Vec3::NAN, d),
+                        1 => Ray::new(eye, Vec3::ZERO),
+                        2 => Ray::with_range(eye, d, 0.0, 0.3),
+                        _ => Ray::new(centre + Vec3::X * 1e-3, Vec3::new(-0.0, -0.0, -1.0)),
+                    };
+                }
+                batch.push(r);
+            }
+        }
+        check::<Watertight>(&tris, &batch, name);
+        check::<Moller>(&tris, &batch, name);
+        check::<Fast<Moller>>(&tris, &batch, name);
+    }
+    // An empty tree and an empty batch.
+    let none: Vec<Triangle> = Vec::new();
+    check::<Watertight>(&none, &rays(&random_soup(10, 1), 30, 2), "empty tree");
+    check::<Watertight>(&random_soup(10, 1), &[], "empty batch");
+}

@@ -245,12 +245,18 @@ unsafe extern "C" {
     fn rtcSetGeometryTransform(geometry: RTCGeometry, time_step: c_uint, format: c_uint, xfm: *const c_void);
     fn rtcIntersect1(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
     fn rtcOccluded1(scene: RTCScene, ctx: *mut RTCIntersectContext, ray: *mut RTCRay);
+    fn rtcIntersect1M(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit, m: c_uint, stride: usize);
+    fn rtcOccluded1M(scene: RTCScene, ctx: *mut RTCIntersectContext, ray: *mut RTCRay, m: c_uint, stride: usize);
     fn rtcIntersect8(valid: *const i32, scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit8);
     fn rtcNewBVH(device: RTCDevice) -> RTCBVH;
     fn rtcBuildBVH(args: *const RTCBuildArguments) -> *mut c_void;
     fn rtcThreadLocalAlloc(alloc: RTCThreadLocalAllocator, bytes: usize, align: usize) -> *mut c_void;
     fn rtcReleaseBVH(bvh: RTCBVH);
 }
+
+/// Rays per call of Embree's stream API in [`Scene::intersect1m`] (Embree's own tutorials
+/// stream a tile's rays at a time; 256 is a 16 x 16 tile).
+pub const STREAM: usize = 256;
 
 fn context() -> RTCIntersectContext {
     RTCIntersectContext {
@@ -381,6 +387,78 @@ impl<'d> Scene<'d> {
     #[inline]
     pub fn occluded1(&self, r: &Ray) -> bool {
         occluded1(self.scene, r)
+    }
+
+    /// Embree's stream API over a batch (`rtcIntersect1M`, as many rays per call as
+    /// [`STREAM`]): the rays copied into Embree's layout a stream at a time, the context flag
+    /// `coherent` (`RTC_INTERSECT_CONTEXT_FLAG_COHERENT`, else `..._INCOHERENT`) telling Embree
+    /// which kind they are; `out(i, (t, primitive))` for each ray. The copying is part of what a
+    /// caller holding its own rays pays.
+    pub fn intersect1m(&self, rays: &[Ray], coherent: bool, mut out: impl FnMut(usize, Option<(f32, u32)>)) {
+        let empty = RTCRayHit {
+            ray: Self::ray(&Ray::new(Vec3::ZERO, Vec3::X)),
+            hit: RTCHit {
+                ng: [0.0; 3],
+                u: 0.0,
+                v: 0.0,
+                prim_id: 0,
+                geom_id: RTC_INVALID_GEOMETRY_ID,
+                inst_id: [0],
+            },
+        };
+        let mut buf = [empty; STREAM];
+        for (k, chunk) in rays.chunks(STREAM).enumerate() {
+            for (b, r) in buf.iter_mut().zip(chunk) {
+                *b = RTCRayHit {
+                    ray: Self::ray(r),
+                    ..empty
+                };
+            }
+            let mut ctx = context();
+            ctx.flags = coherent as c_uint;
+            // SAFETY: `buf` holds `chunk.len()` initialised, aligned RTCRayHits, each
+            // `size_of::<RTCRayHit>()` bytes after the last; the scene is live and committed.
+            unsafe {
+                rtcIntersect1M(
+                    self.scene,
+                    &mut ctx,
+                    buf.as_mut_ptr(),
+                    chunk.len() as c_uint,
+                    std::mem::size_of::<RTCRayHit>(),
+                )
+            };
+            for (i, b) in buf[..chunk.len()].iter().enumerate() {
+                out(
+                    k * STREAM + i,
+                    (b.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((b.ray.tfar, b.hit.prim_id)),
+                );
+            }
+        }
+    }
+
+    /// Embree's stream API for any-hit rays (`rtcOccluded1M`), as [`intersect1m`](Self::intersect1m).
+    pub fn occluded1m(&self, rays: &[Ray], coherent: bool, mut out: impl FnMut(usize, bool)) {
+        let mut buf = [Self::ray(&Ray::new(Vec3::ZERO, Vec3::X)); STREAM];
+        for (k, chunk) in rays.chunks(STREAM).enumerate() {
+            for (b, r) in buf.iter_mut().zip(chunk) {
+                *b = Self::ray(r);
+            }
+            let mut ctx = context();
+            ctx.flags = coherent as c_uint;
+            // SAFETY: as in `intersect1m`, with RTCRays.
+            unsafe {
+                rtcOccluded1M(
+                    self.scene,
+                    &mut ctx,
+                    buf.as_mut_ptr(),
+                    chunk.len() as c_uint,
+                    std::mem::size_of::<RTCRay>(),
+                )
+            };
+            for (i, b) in buf[..chunk.len()].iter().enumerate() {
+                out(k * STREAM + i, b.tfar == f32::NEG_INFINITY);
+            }
+        }
     }
 
     /// Eight rays as one packet: `(t, primitive)` per lane.

@@ -12,7 +12,7 @@ use crate::intersect::{PreparedRay, TriangleLanes};
 
 use super::stack::Stack;
 use crate::layout::{BvhWideRef, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs};
-use crate::math::Lane;
+use crate::math::{Lane, f32x8};
 
 /// Stack entries: enough for `MAX_WIDE_DEPTH` levels of 8-wide nodes.
 const STACK: usize = MAX_WIDE_DEPTH as usize * 7 + 1;
@@ -294,8 +294,8 @@ impl<const S: usize> ClosestWalk<S> {
 /// ```
 // PERF: BVH8, best of 3 x 3 rounds taking turns (Intel Xeon, 2026-12-04), against one call per
 // ray: 262,144 diffuse rays 1.19x faster on the 1M sphereflake, 1.07x on the bunny; 1024 x 1024
-// primary rays (coherent) 1.03x on the bunny and 0.92x (slower) on the sphereflake, hence the name
-// and the plain loop in `BvhWide::intersect_batch`.
+// primary rays (coherent) 1.03x on the bunny and 0.92x (slower) on the sphereflake, hence the name;
+// `intersect_batch` takes this path only for groups of rays from scattered origins.
 pub fn intersect_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[Ray],
@@ -421,6 +421,182 @@ pub fn intersect_batch_ordered<T: TriangleTest, L: Lane, const N: usize>(
             hits[i as usize] = intersect::<T, L, N>(bvh, r);
         }
     });
+}
+
+/// How [`intersect_batch`] and [`occluded_batch`] trace a group of up to 8 consecutive rays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Group {
+    /// The same direction signs and origins close together (a camera tile, shadow rays from a
+    /// tile's hits to a light): one packet of 8 ([`packet`](super::packet), interval culling).
+    Packet,
+    /// Origins apart (diffuse bounces and shadow rays from scattered points): walks two at a time,
+    /// interleaved ([`intersect_batch_incoherent`]), over the whole run of such groups.
+    Scattered,
+    /// Origins close together but directions apart (ambient occlusion from one point): one ray
+    /// at a time, each finding the nodes the last one left in the cache.
+    Single,
+}
+
+/// The largest extent of the tree's root box (its child boxes; empty slots have empty boxes):
+/// the scale of [`Group`]'s origin test; 0 for an empty tree.
+#[inline]
+fn root_extent<L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>) -> f32 {
+    let Some(root) = bvh.nodes.first() else {
+        return 0.0;
+    };
+    let mut extent = 0f32;
+    for a in 0..3 {
+        extent = extent.max(root.bounds.max[a].max_lane() - root.bounds.min[a].min_lane());
+    }
+    extent
+}
+
+/// The path for `rays` (1 to 8 of them): origins within
+/// [`COHERENT_MAX_ORIGIN_SPREAD`](super::packet::COHERENT_MAX_ORIGIN_SPREAD) of `extent` on
+/// every axis count as close together (the packets' own test); packets only for the
+/// conservative box test (they trace boxes conservatively whatever `T` asks for, and a batch
+/// answers exactly as one call per ray). Only speed depends on the answer (NaN origins do not
+/// count in the spread).
+#[inline(always)]
+fn group<T: TriangleTest>(rays: &[Ray], extent: f32) -> Group {
+    let first = rays[0];
+    let signs = first.direction.is_negative_bitmask();
+    let (mut lo, mut hi, mut same) = (first.origin, first.origin, true);
+    for r in &rays[1..] {
+        lo = lo.min(r.origin);
+        hi = hi.max(r.origin);
+        same &= r.direction.is_negative_bitmask() == signs;
+    }
+    let spread = (hi - lo).max_element();
+    if spread > extent * super::packet::COHERENT_MAX_ORIGIN_SPREAD {
+        Group::Scattered
+    } else if same && T::CONSERVATIVE_BOXES {
+        Group::Packet
+    } else {
+        Group::Single
+    }
+}
+
+/// Runs a batch group by group ([`Group`]): `packet(rays, out)` on a packet's 8 rays,
+/// `single(ray)` one by one, `scattered(rays, out)` on each maximal run of scattered groups.
+#[inline(always)]
+fn by_groups<T: TriangleTest, O>(
+    rays: &[Ray],
+    out: &mut [O],
+    extent: f32,
+    mut packet: impl FnMut(&[Ray], &mut [O]),
+    mut single: impl FnMut(&Ray) -> O,
+    mut scattered: impl FnMut(&[Ray], &mut [O]),
+) {
+    let n = rays.len().min(out.len());
+    let (mut run, mut at) = (0, 0);
+    while at < n {
+        let end = (at + 8).min(n);
+        let g = group::<T>(&rays[at..end], extent);
+        if g != Group::Scattered {
+            if run < at {
+                scattered(&rays[run..at], &mut out[run..at]);
+            }
+            if g == Group::Packet {
+                packet(&rays[at..end], &mut out[at..end]);
+            } else {
+                for (o, r) in out[at..end].iter_mut().zip(&rays[at..end]) {
+                    *o = single(r);
+                }
+            }
+            run = end;
+        }
+        at = end;
+    }
+    if run < n {
+        scattered(&rays[run..n], &mut out[run..n]);
+    }
+}
+
+/// Closest hits of a batch of rays, any mix of coherent and incoherent ones: `hits[i]` for
+/// `rays[i]` (the shorter length wins), the same hits as one [`intersect`] per ray (every path
+/// is exact; tested). Each group of 8 consecutive rays takes the path that suits it, decided
+/// from the rays alone:
+///
+/// - the same direction signs and origins close together (a camera tile: lay camera rays out
+///   with [`TileShape`](super::packet::TileShape), or 8 along a scanline): one packet
+///   ([`packet::intersect8`](super::packet::intersect8), interval culling, the default hybrid
+///   switch);
+/// - origins apart (diffuse bounces from scattered points): the run of such groups as
+///   [`intersect_batch_incoherent`] (two walks interleaved);
+/// - origins close together, directions apart (ambient occlusion from one point): one
+///   [`intersect`] per ray.
+///
+/// Packets are used only with the conservative box test (not for [`Fast`](super::Fast) types),
+/// so that every path answers alike. The checks cost a few comparisons per ray.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Moller, wide}};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// // 16 parallel rays (two packets), then 8 from scattered points, then 8 from one point.
+/// let mut rays: Vec<Ray> = (0..16).map(|i| Ray::new(Vec3::new(0.01 * i as f32, 0.02, -3.0), Vec3::Z)).collect();
+/// rays.extend((0..8).map(|i| Ray::new(Vec3::new(0.8 - 0.2 * i as f32, 0.0, 0.0), Vec3::new(0.3, 1.0, 0.1))));
+/// rays.extend((0..8).map(|i| Ray::new(Vec3::ZERO, Vec3::new(i as f32 - 3.5, 1.0, (i % 3) as f32 - 1.0))));
+/// let mut hits = vec![None; rays.len()];
+/// wide::intersect_batch::<Moller, _, 8>(b8.view(), &rays, &mut hits);
+/// for (r, h) in rays.iter().zip(&hits) {
+///     assert_eq!(*h, wide::intersect::<Moller, _, 8>(b8.view(), r));
+/// }
+/// assert!(hits.iter().all(Option::is_some));
+/// ```
+pub fn intersect_batch<T: TriangleTest, L: Lane, const N: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    hits: &mut [Option<Hit>],
+) {
+    by_groups::<T, _>(
+        rays,
+        hits,
+        root_extent(bvh),
+        |r, h| super::packet::intersect_packet::<T, L, N, f32x8, 8>(bvh, r, h, super::packet::DEFAULT_SWITCH),
+        |r| intersect::<T, L, N>(bvh, r),
+        |r, h| intersect_batch_incoherent::<T, L, N>(bvh, r, h),
+    );
+}
+
+/// Any-hit answers of a batch of rays, any mix of coherent and incoherent ones: `occluded[i]` for
+/// `rays[i]`, the same answers as one [`occluded`] per ray. Groups of 8 take the paths of
+/// [`intersect_batch`]: packets ([`packet::occluded8`](super::packet::occluded8)), the
+/// interleaved walks of [`occluded_batch_incoherent`], or one ray at a time.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Watertight, wide}};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// // Shadow rays towards a light at (0, 0, 5): 8 from a small patch below the sphere, 8 from
+/// // points scattered around it.
+/// let light = Vec3::new(0.0, 0.0, 5.0);
+/// let patch = (0..8).map(|i| Vec3::new(0.001 * i as f32, 0.0, -2.0));
+/// let scattered = (0..8).map(|i| Vec3::new(2.0 - 0.5 * i as f32, 1.5, -0.5 * (i % 2) as f32));
+/// let rays: Vec<Ray> = patch.chain(scattered).map(|p| Ray::with_range(p, light - p, 0.0, 1.0)).collect();
+/// let mut out = vec![false; rays.len()];
+/// wide::occluded_batch::<Watertight, _, 8>(b8.view(), &rays, &mut out);
+/// for (r, &o) in rays.iter().zip(&out) {
+///     assert_eq!(o, wide::occluded::<Watertight, _, 8>(b8.view(), r));
+/// }
+/// assert!(out[..8].iter().all(|&o| o)); // the patch lies in the sphere's shadow
+/// ```
+pub fn occluded_batch<T: TriangleTest, L: Lane, const N: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    occluded: &mut [bool],
+) {
+    by_groups::<T, _>(
+        rays,
+        occluded,
+        root_extent(bvh),
+        |r, o| super::packet::occluded_packet::<T, L, N, f32x8, 8>(bvh, r, o, super::packet::DEFAULT_SWITCH),
+        |r| self::occluded::<T, L, N>(bvh, r),
+        |r, o| occluded_batch_incoherent::<T, L, N>(bvh, r, o),
+    );
 }
 
 /// `true` if `ray` hits any triangle of the wide BVH `bvh` within `[tmin, tmax)`; stops at the
@@ -870,7 +1046,9 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
         occluded_filtered::<T, L, N, _>(self.view(), ray, filter)
     }
 
-    /// Closest hits of a batch: `hits[i]` for `rays[i]` (the shorter length wins).
+    /// Closest hits of a batch: `hits[i]` for `rays[i]` (the shorter length wins), the same as one
+    /// [`intersect`](Self::intersect) per ray; groups of 8 coherent rays as packets, scattered
+    /// rays interleaved ([`intersect_batch`]).
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
@@ -884,9 +1062,7 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     /// assert_eq!(hits.map(|h| h.is_some()), [true, true, true, true, false]); // x = 1.0 passes beside
     /// ```
     pub fn intersect_batch<T: TriangleTest>(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
-        for (r, h) in rays.iter().zip(hits.iter_mut()) {
-            *h = self.intersect::<T>(r);
-        }
+        intersect_batch::<T, L, N>(self.view(), rays, hits);
     }
 
     /// Closest hits of a batch of incoherent rays ([`intersect_batch_incoherent`]).
@@ -931,7 +1107,9 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
         intersect_batch_incoherent_filtered::<T, L, N, _>(self.view(), rays, hits, filter);
     }
 
-    /// Any-hit answers of a batch: `occluded[i]` for `rays[i]`.
+    /// Any-hit answers of a batch: `occluded[i]` for `rays[i]`, the same as one
+    /// [`occluded`](Self::occluded) per ray; groups of 8 coherent rays as packets, scattered rays
+    /// interleaved ([`occluded_batch`]).
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
@@ -949,9 +1127,7 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     /// assert_eq!(out, [true, false, false]); // from inside; outside facing away; ending inside
     /// ```
     pub fn occluded_batch<T: TriangleTest>(&self, rays: &[Ray], occluded: &mut [bool]) {
-        for (r, o) in rays.iter().zip(occluded.iter_mut()) {
-            *o = self.occluded::<T>(r);
-        }
+        occluded_batch::<T, L, N>(self.view(), rays, occluded);
     }
 
     /// Any-hit answers of a batch of incoherent rays ([`occluded_batch_incoherent`]).
@@ -1218,5 +1394,42 @@ fn reordered_par<O: Copy + Default + Send>(
     if out.len().min(rays.len()) > n {
         let m = out.len().min(rays.len());
         trace(&rays[n..m], &mut out[n..m]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Group, group};
+    use crate::traverse::{Fast, Moller};
+    use crate::{Ray, Vec3};
+
+    /// The paths of `intersect_batch` for the kinds of rays its docs name (the answers are
+    /// tested in `tests/wide.rs`).
+    #[test]
+    fn groups_by_kind() {
+        let eye = Vec3::new(0.0, 0.0, -5.0);
+        let tile: [Ray; 8] = core::array::from_fn(|i| Ray::new(eye, Vec3::new(0.01 * i as f32, 0.02, 1.0)));
+        assert_eq!(group::<Moller>(&tile, 2.0), Group::Packet);
+        assert_eq!(group::<Moller>(&tile[..1], 2.0), Group::Packet);
+        assert_eq!(group::<Fast<Moller>>(&tile, 2.0), Group::Single); // packets test boxes conservatively
+        // Origins apart by more than 1/64 of the extent.
+        let mut apart = tile;
+        apart[5].origin.y += 0.04;
+        assert_eq!(group::<Moller>(&apart, 2.0), Group::Scattered);
+        apart[5].origin.y -= 0.01; // 0.03 <= 2 / 64
+        assert_eq!(group::<Moller>(&apart, 2.0), Group::Packet);
+        // One point, directions in different octants; -0.0 counts as negative.
+        let mut fan = tile;
+        fan[2].direction.x = -0.5;
+        assert_eq!(group::<Moller>(&fan, 2.0), Group::Single);
+        let mut zero = tile;
+        zero[0].direction.x = -0.0;
+        assert_eq!(group::<Moller>(&zero, 2.0), Group::Single);
+        // A NaN origin does not count in the spread (every path answers alike anyway).
+        let mut nan = fan;
+        nan[1].origin = Vec3::NAN;
+        assert_eq!(group::<Moller>(&nan, 2.0), Group::Single);
+        // An empty tree (extent 0): any spread is scattered.
+        assert_eq!(group::<Moller>(&apart, 0.0), Group::Scattered);
     }
 }
