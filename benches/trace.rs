@@ -146,6 +146,17 @@ fn run_bvh8_batch(c: &Contenders, rays: &[Ray]) -> usize {
         .sum()
 }
 
+/// `wide::occluded_batch_stream`: 64 rays at a time walking the tree together.
+fn run_bvh8_occluded_stream(c: &Contenders, rays: &[Ray]) -> usize {
+    let mut occ = [false; 256];
+    rays.chunks(256)
+        .map(|r| {
+            strahl::traverse::wide::occluded_batch_stream::<Moller, _, 8>(c.bvh8.view(), r, &mut occ);
+            occ[..r.len()].iter().filter(|&&o| o).count()
+        })
+        .sum()
+}
+
 /// `BvhWide::occluded_batch` on streams of 256 rays, as [`run_bvh8_batch`].
 fn run_bvh8_occluded_batch(c: &Contenders, rays: &[Ray]) -> usize {
     let mut occ = [false; 256];
@@ -417,6 +428,7 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
                 ("bvh8_filter_odd", run_bvh8_occluded_filter_odd),
                 ("bvh8_incoherent", run_bvh8_occluded_incoherent),
                 ("bvh8_batch", run_bvh8_occluded_batch),
+                ("bvh8_stream", run_bvh8_occluded_stream),
                 ("bvh8_reordered", run_bvh8_occluded_reordered),
                 ("packet8_bvh8", run_packet8_occluded),
                 ("bvh_crate", run_bvh_crate_occluded),

@@ -300,6 +300,23 @@ fn malformed_views_batches_equal_single_rays() {
     let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
     let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
     let rays = rays(&tris, 400, 5);
+    // Camera rays in 4 x 2 tiles (packets in the adaptive batches).
+    let (lo, hi) = tris
+        .iter()
+        .flatten()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), v| (l.min(*v), h.max(*v)));
+    let eye = hi + (hi - lo);
+    let tiles: Vec<Ray> = (0..256)
+        .map(|i| {
+            let (x, y) = (
+                (i % 4 + 4 * (i / 8 % 8)) as f32 / 32.0,
+                (i / 4 % 2 + 2 * (i / 64)) as f32 / 8.0,
+            );
+            Ray::new(eye, lo + (hi - lo) * Vec3::new(x, y, 0.5) - eye)
+        })
+        .collect();
+    let tile_hits = tiles.iter().filter(|r| b8.intersect::<Watertight>(r).is_some()).count();
+    assert!(tile_hits > 20 && tile_hits < 250, "{tile_hits} of the tiles' rays hit");
     let n = b8.nodes().len();
     // The first slot holding a real child.
     let used = |node: &Node8| node.child.iter().position(|&c| c != EMPTY_CHILD).unwrap_or(0);
@@ -330,6 +347,29 @@ fn malformed_views_batches_equal_single_rays() {
             wide::intersect_batch_ordered::<Watertight, _, 8>(view, &rays, &order, &mut hits_o);
             wide::occluded_batch_ordered::<Watertight, _, 8>(view, &rays, &order, &mut occ_o);
             assert_eq!((&hits_o, &occ_o), (&hits, &occ), "{what} at {at}: ordered batches");
+            // The adaptive batches, over the rays and over camera tiles (their packet path).
+            let (mut hits_a, mut occ_a) = (vec![None; rays.len()], vec![false; rays.len()]);
+            wide::intersect_batch::<Watertight, _, 8>(view, &rays, &mut hits_a);
+            wide::occluded_batch::<Watertight, _, 8>(view, &rays, &mut occ_a);
+            assert_eq!((&hits_a, &occ_a), (&hits, &occ), "{what} at {at}: adaptive batches");
+            let mut occ_s = vec![false; rays.len()];
+            wide::occluded_batch_stream::<Watertight, _, 8>(view, &rays, &mut occ_s);
+            assert_eq!(occ_s, occ, "{what} at {at}: ray streams");
+            let (mut hits_t, mut occ_t) = (vec![None; tiles.len()], vec![false; tiles.len()]);
+            wide::intersect_batch::<Watertight, _, 8>(view, &tiles, &mut hits_t);
+            wide::occluded_batch::<Watertight, _, 8>(view, &tiles, &mut occ_t);
+            for (i, r) in tiles.iter().enumerate() {
+                assert_eq!(
+                    hits_t[i],
+                    wide::intersect::<Watertight, _, 8>(view, r),
+                    "{what} at {at}: tile ray {i}"
+                );
+                assert_eq!(
+                    occ_t[i],
+                    wide::occluded::<Watertight, _, 8>(view, r),
+                    "{what} at {at}: tile ray {i}"
+                );
+            }
             for (i, r) in rays.iter().enumerate() {
                 let single = wide::intersect::<Watertight, _, 8>(view, r);
                 let any = wide::occluded::<Watertight, _, 8>(view, r);
@@ -518,6 +558,11 @@ fn adaptive_batches_equal_single_rays() {
                 let (mut o8, mut o4) = (vec![true; len], vec![true; len]);
                 wide::occluded_batch::<T, _, 8>(b8.view(), rays, &mut o8);
                 b4.occluded_batch::<T>(rays, &mut o4);
+                let (mut s8, mut s4) = (vec![true; len], vec![true; len]);
+                wide::occluded_batch_stream::<T, _, 8>(b8.view(), rays, &mut s8);
+                wide::occluded_batch_stream::<T, _, 4>(b4.view(), rays, &mut s4);
+                assert_eq!(s8, o8, "{what} skip {skip}: bvh8 streams");
+                assert_eq!(s4, o4, "{what} skip {skip}: bvh4 streams");
                 let n = rays.len().min(len);
                 for (i, r) in rays[..n].iter().enumerate() {
                     let (hit, occ) = (b8.intersect::<T>(r), b8.occluded::<T>(r));
@@ -545,6 +590,7 @@ fn adaptive_batches_equal_single_rays() {
         ("bunny", scene::bunny().to_soup()),
         ("random", random_soup(1500, 9)),
         ("same triangle", vec![[Vec3::ZERO, Vec3::X, Vec3::Y]; 50]),
+        ("sphereflake", scene::sphereflake(2, 1).to_soup()),
     ] {
         let (lo, hi) = tris
             .iter()
@@ -587,6 +633,20 @@ fn adaptive_batches_equal_single_rays() {
         check::<Moller>(&tris, &batch, name);
         check::<Fast<Moller>>(&tris, &batch, name);
     }
+    // Long rays from scattered points through a sparse soup of small triangles: each enters many
+    // subtrees alone, more than a stream holds back at once.
+    let mut rng = Rng::new(8);
+    let sparse: Vec<Triangle> = random_soup(6000, 12)
+        .into_iter()
+        .map(|t| t.map(|v| (v - t[0]) * 0.1 + t[0]))
+        .collect();
+    let long: Vec<Ray> = (0..200)
+        .map(|_| {
+            let o = Vec3::new(rng.f32(), rng.f32(), 0.0) * 10.0;
+            Ray::new(o, Vec3::new(rng.f32() * 10.0, rng.f32() * 10.0, 10.0) - o)
+        })
+        .collect();
+    check::<Moller>(&sparse, &long, "sparse soup");
     // An empty tree and an empty batch.
     let none: Vec<Triangle> = Vec::new();
     check::<Watertight>(&none, &rays(&random_soup(10, 1), 30, 2), "empty tree");
