@@ -245,6 +245,25 @@ pub fn check_bvh(case: &BvhCase) {
             "{:?}: occluded_batch_reordered",
             params.strategy
         );
+        // The adaptive batches (packets, interleaved walks, ray streams or one ray at a time by
+        // group) and the ray streams alone: one call per ray's any-hit answers exactly; closest
+        // hits against brute force below, as the packets' (a packet visits nodes in another
+        // order, so of two triangles tied at a hit it may report the other one: found by this
+        // target, two triangles hit at the same `t` and barycentrics).
+        let mut adaptive_hits = vec![None; case.rays.len()];
+        b8.intersect_batch::<Watertight>(&case.rays, &mut adaptive_hits);
+        let (mut adaptive_occ, mut stream_occ) = (vec![false; case.rays.len()], vec![false; case.rays.len()]);
+        b4.occluded_batch::<Watertight>(&case.rays, &mut adaptive_occ);
+        wide::occluded_batch_stream::<Watertight, _, 8>(b8.view(), &case.rays, &mut stream_occ);
+        for (ray, got) in case.rays.iter().zip(&adaptive_occ) {
+            assert_eq!(
+                *got,
+                b4.occluded::<Watertight>(ray),
+                "{:?}: occluded_batch (BVH4) {ray:?}",
+                params.strategy
+            );
+        }
+        assert_eq!(stream_occ, batch_occ, "{:?}: occluded_batch_stream", params.strategy);
         for ((ray, got), ord) in case.rays.iter().zip(&batch_hits).zip(&ordered_hits) {
             let single = bits(b8.intersect::<Watertight>(ray));
             assert_eq!(
@@ -293,6 +312,7 @@ pub fn check_bvh(case: &BvhCase) {
             agrees(&kept, ray, b8.intersect::<Watertight>(ray), want, &what("bvh8"));
             agrees(&kept, ray, packet_hits[i], want, &what("packet8 hybrid"));
             agrees(&kept, ray, packet_pure[i], want, &what("packet8"));
+            agrees(&kept, ray, adaptive_hits[i], want, &what("intersect_batch"));
             let occ = strahl::traverse::occluded_brute_force::<Watertight, _>(&kept[..], ray);
             assert_eq!(
                 b2.occluded::<Watertight, _>(tris, ray),

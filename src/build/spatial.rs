@@ -302,7 +302,7 @@ pub fn clip_triangle(t: &crate::geometry::Triangle, within: &Aabb, axis: usize, 
 
 impl Bvh2 {
     /// Builds a tree with spatial splits (SBVH, Stich et al. 2009; see
-    /// [`SpatialSplits`] and the [`spatial`](self) notes in the module docs): triangles only,
+    /// [`SpatialSplits`] and the notes in `build/spatial.rs`): triangles only,
     /// since references are clipped against planes. From `params` it takes the costs, the leaf
     /// sizes, `bins` (the object splits' binning), `max_depth` and `refine` (the passes work on
     /// node boxes, so they keep the clipped ones); the other fields are not used.

@@ -513,9 +513,11 @@ fn by_groups<T: TriangleTest, O>(
 }
 
 /// Closest hits of a batch of rays, any mix of coherent and incoherent ones: `hits[i]` for
-/// `rays[i]` (the shorter length wins), the same hits as one [`intersect`] per ray (every path
-/// is exact; tested). Each group of 8 consecutive rays takes the path that suits it, decided
-/// from the rays alone:
+/// `rays[i]` (the shorter length wins), the hits of one [`intersect`] per ray: the same `t`, and
+/// the same primitive unless two triangles tie there (a packet visits nodes in another order, so
+/// of two triangles hit at the same `t` it may report the other one, as
+/// [`packet`](super::packet) documents). Each group of 8 consecutive rays takes the path that
+/// suits it, decided from the rays alone:
 ///
 /// - the same direction signs and origins close together (a camera tile: lay camera rays out
 ///   with [`TileShape`](super::packet::TileShape), or 8 along a scanline): one packet
@@ -772,9 +774,10 @@ const STREAM: usize = 64;
 ///
 /// Every ray's box and triangle tests are its single-ray walk's ([`node_lanes`], `any_in_pack`),
 /// and an any-hit answer does not depend on the visiting order, so each answer equals
-/// [`occluded_prepared`]'s. The walk visits every (node, ray) pair that ray's own walk would, so
-/// where that walk would exceed its budget (a cycle in a malformed view) or its stack, the
-/// stream does too; it then answers its open rays with [`occluded_prepared`] itself.
+/// [`occluded_prepared`]'s. In a valid tree the stream and its held-back walks visit each node
+/// at most once, all together; they share one budget of that many visits, and where they exceed
+/// it or the stack (a malformed view: a cycle, a node with two parents) every ray is answered by
+/// [`occluded_prepared`] itself.
 /// `HOLD` is how many held-back subtrees are kept before they are walked ([`LONE`]).
 fn occluded_stream<T: TriangleTest, L: Lane, const N: usize, const HOLD: usize>(
     bvh: BvhWideRef<'_, L, N>,
@@ -801,8 +804,10 @@ fn occluded_stream<T: TriangleTest, L: Lane, const N: usize, const HOLD: usize>(
         if mask != 0 {
             if mask & (mask - 1) == 0 && cur & LEAF_BIT == 0 {
                 if n_lone == HOLD {
-                    blocked = walk_lone::<T, L, N>(bvh, rays, &lone, blocked);
-                    n_lone = 0;
+                    let (b, left) = walk_lone::<T, L, N>(bvh, rays, &lone, blocked, budget);
+                    let Some(left) = left else { break 'walk };
+                    blocked = b;
+                    (budget, n_lone) = (left, 0);
                 }
                 lone[n_lone] = (mask.trailing_zeros() as u8, cur);
                 n_lone += 1;
@@ -863,14 +868,17 @@ fn occluded_stream<T: TriangleTest, L: Lane, const N: usize, const HOLD: usize>(
             }
         }
         if len == 0 {
-            return walk_lone::<T, L, N>(bvh, rays, &lone[..n_lone], blocked);
+            match walk_lone::<T, L, N>(bvh, rays, &lone[..n_lone], blocked, budget) {
+                (blocked, Some(_)) => return blocked,
+                (_, None) => break 'walk,
+            }
         }
         len -= 1;
         (cur, mask) = (codes[len], masks[len]);
     }
-    // Out of budget or stack: each open ray's own walk (which runs out too and scans the packs).
-    blocked = walk_lone::<T, L, N>(bvh, rays, &lone[..n_lone], blocked);
-    let mut m = open & !blocked;
+    // Out of budget or stack (a malformed view): every ray's own walk answers.
+    let mut m = open;
+    blocked = 0;
     while m != 0 {
         let i = m.trailing_zeros() as usize;
         m &= m - 1;
@@ -907,35 +915,40 @@ fn stream_fits<L, const N: usize>(bvh: BvhWideRef<'_, L, N>) -> bool {
 const LONE: usize = 128;
 
 /// The any-hit walks of `lone`'s `(ray, subtree)` pairs, two at a time interleaved, for the rays
-/// not yet `blocked`; returns `blocked` with the rays found blocked added.
+/// not yet `blocked`, sharing the stream's node `budget`: `blocked` with the rays found blocked
+/// added, and the budget left, or `None` where the walks spent it all (a malformed view).
 #[inline(never)]
 fn walk_lone<T: TriangleTest, L: Lane, const N: usize>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[PreparedRay],
     lone: &[(u8, u32)],
     blocked: u64,
-) -> u64 {
+    budget: usize,
+) -> (u64, Option<usize>) {
     let blocked = core::cell::Cell::new(blocked);
+    let mut left = Some(budget);
     interleave2(
         0..lone.len(),
         |k| {
             let (i, code) = lone[k];
             let mut w = AnyHitWalk::<STACK>::new(bvh, &rays[i as usize]);
-            w.cur = code;
+            (w.cur, w.budget) = (code, budget);
             if blocked.get() >> i & 1 == 1 {
                 w.done = Some(false);
             }
             (i, w)
         },
         |(i, w)| w.step::<T, L, N, _>(bvh, &rays[*i as usize], &mut AcceptAll),
-        |(_, w)| w.done,
-        |k, hit| {
+        |(_, w)| w.done.map(|hit| (hit, w.budget)),
+        |k, (hit, rest)| {
             if hit {
                 blocked.set(blocked.get() | 1 << lone[k].0);
             }
+            // A walk that ran out of budget answered from a scan of every pack.
+            left = left.and_then(|l| l.checked_sub(budget - rest)).filter(|_| rest > 0);
         },
     );
-    blocked.get()
+    (blocked.get(), left)
 }
 
 /// [`occluded`] for every ray of a batch, 64 rays at a time walking the tree together: `out[i]`
@@ -1286,9 +1299,10 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
         occluded_filtered::<T, L, N, _>(self.view(), ray, filter)
     }
 
-    /// Closest hits of a batch: `hits[i]` for `rays[i]` (the shorter length wins), the same as one
-    /// [`intersect`](Self::intersect) per ray; groups of 8 coherent rays as packets, scattered
-    /// rays interleaved ([`intersect_batch`]).
+    /// Closest hits of a batch: `hits[i]` for `rays[i]` (the shorter length wins), those of one
+    /// [`intersect`](Self::intersect) per ray (of two triangles tied at a hit, possibly the
+    /// other); groups of 8 coherent rays as packets, scattered rays interleaved
+    /// ([`intersect_batch`]).
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
