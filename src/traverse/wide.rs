@@ -774,15 +774,14 @@ const STREAM: usize = 64;
 ///
 /// Every ray's box and triangle tests are its single-ray walk's ([`node_lanes`], `any_in_pack`),
 /// and an any-hit answer does not depend on the visiting order, so each answer equals
-/// [`occluded_prepared`]'s. In a valid tree the stream and its held-back walks visit each node
-/// at most once, all together; they share one budget of that many visits, and where they exceed
-/// it or the stack (a malformed view: a cycle, a node with two parents) every ray is answered by
-/// [`occluded_prepared`] itself.
-/// `HOLD` is how many held-back subtrees are kept before they are walked ([`LONE`]).
-fn occluded_stream<T: TriangleTest, L: Lane, const N: usize, const HOLD: usize>(
-    bvh: BvhWideRef<'_, L, N>,
-    rays: &[PreparedRay],
-) -> u64 {
+/// [`occluded_prepared`]'s wherever that walk runs to its end. It runs to its end unless it
+/// exceeds its budget of `nodes.len()` node visits or its stack, and the stream visits every
+/// (node, ray) pair that walk would: so the stream stops and answers every ray with
+/// [`occluded_prepared`] itself where it exceeds the same budget (a cycle, a node with two
+/// parents) or visits a node deeper than [`MAX_WIDE_DEPTH`] (below that depth the single walk's
+/// stack cannot overflow: at most 7 entries per level above and 8 at the node). A valid tree does
+/// neither.
+fn occluded_stream<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>, rays: &[PreparedRay]) -> u64 {
     let rays = &rays[..rays.len().min(STREAM)];
     let mut open = 0u64;
     for (i, r) in rays.iter().enumerate() {
@@ -792,27 +791,15 @@ fn occluded_stream<T: TriangleTest, L: Lane, const N: usize, const HOLD: usize>(
         return 0;
     }
     let mut blocked = 0u64;
-    let (mut codes, mut masks) = ([0u32; STACK], [0u64; STACK]);
+    // Entries: child code, the rays that entered it, its depth (the root's is 1).
+    let (mut codes, mut masks, mut depths) = ([0u32; STACK], [0u64; STACK], [0u8; STACK]);
     let (mut len, mut budget) = (0usize, bvh.nodes.len());
-    let (mut cur, mut mask) = (0u32, open);
-    // Subtrees only one ray enters: walked afterwards, two walks interleaved (their cache
-    // misses overlap), once the rays still open are known.
-    let mut lone = [(0u8, 0u32); HOLD];
-    let mut n_lone = 0;
+    let (mut cur, mut mask, mut depth) = (0u32, open, 1u32);
     'walk: loop {
         mask &= !blocked;
         if mask != 0 {
-            if mask & (mask - 1) == 0 && cur & LEAF_BIT == 0 {
-                if n_lone == HOLD {
-                    let (b, left) = walk_lone::<T, L, N>(bvh, rays, &lone, blocked, budget);
-                    let Some(left) = left else { break 'walk };
-                    blocked = b;
-                    (budget, n_lone) = (left, 0);
-                }
-                lone[n_lone] = (mask.trailing_zeros() as u8, cur);
-                n_lone += 1;
-            } else if cur & LEAF_BIT == 0 {
-                if budget == 0 {
+            if cur & LEAF_BIT == 0 {
+                if budget == 0 || depth > MAX_WIDE_DEPTH {
                     break 'walk;
                 }
                 budget -= 1;
@@ -838,12 +825,12 @@ fn occluded_stream<T: TriangleTest, L: Lane, const N: usize, const HOLD: usize>(
                             if len == STACK {
                                 break 'walk;
                             }
-                            (codes[len], masks[len]) = (code, m);
+                            (codes[len], masks[len], depths[len]) = (code, m, (depth + 1) as u8);
                             len += 1;
                         }
                     }
                     if let Some((code, m)) = next {
-                        (cur, mask) = (code, m);
+                        (cur, mask, depth) = (code, m, depth + 1);
                         continue;
                     }
                 }
@@ -868,15 +855,12 @@ fn occluded_stream<T: TriangleTest, L: Lane, const N: usize, const HOLD: usize>(
             }
         }
         if len == 0 {
-            match walk_lone::<T, L, N>(bvh, rays, &lone[..n_lone], blocked, budget) {
-                (blocked, Some(_)) => return blocked,
-                (_, None) => break 'walk,
-            }
+            return blocked;
         }
         len -= 1;
-        (cur, mask) = (codes[len], masks[len]);
+        (cur, mask, depth) = (codes[len], masks[len], depths[len] as u32);
     }
-    // Out of budget or stack (a malformed view): every ray's own walk answers.
+    // Past the budget, the depth or the stack (a malformed view): every ray's own walk answers.
     let mut m = open;
     blocked = 0;
     while m != 0 {
@@ -892,9 +876,9 @@ fn occluded_stream<T: TriangleTest, L: Lane, const N: usize, const HOLD: usize>(
 /// Trees up to this size (nodes and packs) take [`occluded_batch_stream`] for scattered rays in
 /// [`occluded_batch`], larger ones [`occluded_batch_incoherent`]. Measured
 /// (`tests/stream_speed.rs`, shadow rays, BVH8, Intel Xeon with 2 MB of L2 per core, best of 5):
-/// against one call per ray, streams 1.09-1.18x and interleaved walks 0.98-0.99x on trees of
-/// 0.2 MB (the bunny, a 3,200-triangle sphereflake); 1.03-1.05x against 0.99x at 0.8-2 MB;
-/// 0.97-1.07x against 1.08-1.14x at 7.8-70 MB, where the misses of interleaved walks overlap.
+/// against one call per ray, streams 1.09-1.16x and interleaved walks 0.97-0.98x on trees of
+/// 0.2 MB (the bunny, a 3,200-triangle sphereflake); 0.99-1.02x against 0.99x at 0.8-2 MB;
+/// 0.90-0.94x against 1.07-1.13x at 7.8-70 MB, where the misses of interleaved walks overlap.
 ///
 /// ```
 /// use strahl::{build::{Bvh2, BuildParams}, layout::Bvh8, traverse::wide::STREAM_MAX_BYTES};
@@ -911,46 +895,6 @@ fn stream_fits<L, const N: usize>(bvh: BvhWideRef<'_, L, N>) -> bool {
     size_of_val(bvh.nodes) + size_of_val(bvh.packs) <= STREAM_MAX_BYTES
 }
 
-/// Subtrees a stream holds back for single rays at a time ([`walk_lone`]).
-const LONE: usize = 128;
-
-/// The any-hit walks of `lone`'s `(ray, subtree)` pairs, two at a time interleaved, for the rays
-/// not yet `blocked`, sharing the stream's node `budget`: `blocked` with the rays found blocked
-/// added, and the budget left, or `None` where the walks spent it all (a malformed view).
-#[inline(never)]
-fn walk_lone<T: TriangleTest, L: Lane, const N: usize>(
-    bvh: BvhWideRef<'_, L, N>,
-    rays: &[PreparedRay],
-    lone: &[(u8, u32)],
-    blocked: u64,
-    budget: usize,
-) -> (u64, Option<usize>) {
-    let blocked = core::cell::Cell::new(blocked);
-    let mut left = Some(budget);
-    interleave2(
-        0..lone.len(),
-        |k| {
-            let (i, code) = lone[k];
-            let mut w = AnyHitWalk::<STACK>::new(bvh, &rays[i as usize]);
-            (w.cur, w.budget) = (code, budget);
-            if blocked.get() >> i & 1 == 1 {
-                w.done = Some(false);
-            }
-            (i, w)
-        },
-        |(i, w)| w.step::<T, L, N, _>(bvh, &rays[*i as usize], &mut AcceptAll),
-        |(_, w)| w.done.map(|hit| (hit, w.budget)),
-        |k, (hit, rest)| {
-            if hit {
-                blocked.set(blocked.get() | 1 << lone[k].0);
-            }
-            // A walk that ran out of budget answered from a scan of every pack.
-            left = left.and_then(|l| l.checked_sub(budget - rest)).filter(|_| rest > 0);
-        },
-    );
-    (blocked.get(), left)
-}
-
 /// [`occluded`] for every ray of a batch, 64 rays at a time walking the tree together: `out[i]`
 /// for `rays[i]` (the shorter length wins), the same answers as one call per ray.
 ///
@@ -958,9 +902,8 @@ fn walk_lone<T: TriangleTest, L: Lane, const N: usize>(
 /// architectures", 2015; Embree's `rtcOccluded1M`): each stack entry carries the mask of the
 /// rays that entered it, so a node is loaded once for all of them and tested against each with
 /// its single-ray slab test; a leaf's packs are tested with each entering ray's single-ray
-/// kernel; rays retire when blocked. A subtree that only one ray enters is held back and walked
-/// afterwards, two such walks interleaved. It pays where the rays share nodes and the tree sits
-/// in the cache: shadow rays from scattered points through the bunny's BVH8, 1.09-1.18x one call
+/// kernel; rays retire when blocked. It pays where the rays share nodes and the tree sits
+/// in the cache: shadow rays from scattered points through the bunny's BVH8, 1.09-1.16x one call
 /// per ray; on trees larger than the cache the interleaved walks of
 /// [`occluded_batch_incoherent`] do better ([`STREAM_MAX_BYTES`], which [`occluded_batch`]
 /// follows).
@@ -991,7 +934,7 @@ pub fn occluded_batch_stream<T: TriangleTest, L: Lane, const N: usize>(
         for (p, ray) in prepared.iter_mut().zip(r) {
             *p = prepare::<T>(ray);
         }
-        let blocked = occluded_stream::<T, L, N, LONE>(bvh, &prepared[..r.len()]);
+        let blocked = occluded_stream::<T, L, N>(bvh, &prepared[..r.len()]);
         for (i, o) in o.iter_mut().enumerate() {
             *o = blocked >> i & 1 == 1;
         }
@@ -1363,7 +1306,7 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
 
     /// Any-hit answers of a batch: `occluded[i]` for `rays[i]`, the same as one
     /// [`occluded`](Self::occluded) per ray; groups of 8 coherent rays as packets, scattered rays
-    /// interleaved ([`occluded_batch`]).
+    /// as ray streams (small trees) or interleaved walks ([`occluded_batch`]).
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
@@ -1657,11 +1600,11 @@ mod tests {
     use crate::traverse::{Fast, Moller};
     use crate::{Ray, Vec3};
 
-    /// Streams that hold back 1, 2 or 5 subtrees at a time (walked whenever that many are
-    /// waiting) answer as single rays: long rays from scattered points through a sparse soup.
+    /// Streams answer as single rays: 40 streams of 64 long rays from scattered points through a
+    /// soup, some blocked and some not.
     #[test]
     #[cfg(feature = "alloc")]
-    fn streams_walk_held_back_subtrees() {
+    fn streams_equal_single_rays() {
         use crate::build::{BuildParams, Bvh2};
         use crate::intersect::PreparedRay;
         use crate::layout::Bvh8;
@@ -1689,10 +1632,7 @@ mod tests {
                 .map(|(i, r)| (super::occluded_prepared::<Moller, _, 8>(b8.view(), r) as u64) << i)
                 .fold(0, |a, b| a | b);
             (some, all) = (some | want, all & want);
-            assert_eq!(occluded_stream::<Moller, _, 8, 1>(b8.view(), &rays), want);
-            assert_eq!(occluded_stream::<Moller, _, 8, 2>(b8.view(), &rays), want);
-            assert_eq!(occluded_stream::<Moller, _, 8, 5>(b8.view(), &rays), want);
-            assert_eq!(occluded_stream::<Moller, _, 8, 128>(b8.view(), &rays), want);
+            assert_eq!(occluded_stream::<Moller, _, 8>(b8.view(), &rays), want);
         }
         assert!(some == u64::MAX && all != u64::MAX, "{some:x} {all:x}"); // blocked and open rays
     }
