@@ -19,6 +19,29 @@ fn pack_of(tri: [Vec3; 3]) -> Bvh8 {
 fn big() -> Aabb {
     Aabb::new(Vec3::splat(-10.0), Vec3::splat(10.0))
 }
+/// Pack 0 misses every ray of these tests (it lies far away); pack 1, which no leaf refers to
+/// in most views, is hit by the rays at x < 0: found only by a scan of every pack.
+fn miss_and_hit_packs() -> Vec<strahl::intersect::TriangleLanes<strahl::math::f32x8, 8>> {
+    let miss = pack_of([
+        Vec3::new(100.0, 100.0, 100.0),
+        Vec3::new(101.0, 100.0, 100.0),
+        Vec3::new(100.0, 101.0, 100.0),
+    ]);
+    let hit = pack_of([
+        Vec3::new(-8.0, -8.0, 0.0),
+        Vec3::new(-2.0, -8.0, 0.0),
+        Vec3::new(-5.0, 8.0, 0.0),
+    ]);
+    vec![miss.packs()[0], hit.packs()[0]]
+}
+/// A node with the boxes `boxes` in its first slots and the children `kids`, the rest empty.
+fn node(boxes: &[Aabb], kids: &[u32]) -> Node8 {
+    let mut n = Node8::empty();
+    n.bounds = AabbX8::from_boxes(boxes);
+    n.child = [EMPTY_CHILD; 8];
+    n.child[..kids.len()].copy_from_slice(kids);
+    n
+}
 fn check(view: Bvh8Ref, rays: &[Ray], what: &str) {
     let single: Vec<bool> = rays.iter().map(|r| wide::occluded::<Moller, _, 8>(view, r)).collect();
     let mut s = vec![false; rays.len()];
@@ -69,20 +92,10 @@ fn stream_empty_slots_with_boxes() {
 /// A plain tree (every code in range, no cycles, no second parents), too deep: two rays walk a
 /// chain of 50 nodes together (7 leaf siblings pending per level), then ray A alone a chain of 50
 /// more. A's own walk overflows its stack and scans every pack (an unreferenced pack it hits);
-/// the stream walks A's lone subtree with a fresh stack and answers false.
+/// a stream that walked A's part on a fresh stack (the first version) answered false.
 #[test]
-fn stream_lone_walk_fresh_stack() {
-    let miss = pack_of([
-        Vec3::new(100.0, 100.0, 100.0),
-        Vec3::new(101.0, 100.0, 100.0),
-        Vec3::new(100.0, 101.0, 100.0),
-    ]);
-    let hit = pack_of([
-        Vec3::new(-8.0, -8.0, 0.0),
-        Vec3::new(-2.0, -8.0, 0.0),
-        Vec3::new(-5.0, 8.0, 0.0),
-    ]);
-    let packs = vec![miss.packs()[0], hit.packs()[0]];
+fn stream_deep_below_where_rays_part() {
+    let packs = miss_and_hit_packs();
     let miss_leaf = LEAF_BIT; // pack 0, one pack
     let (l1, l2) = (50usize, 50usize);
     let mut nodes: Vec<Node8> = Vec::new();
@@ -194,30 +207,13 @@ fn packets_on_deep_views() {
     assert_eq!(h, hs, "packets closest, off by one");
 }
 
-/// Kills the mutant without `.filter(|_| rest > 0)`: B and C walk X together (spending shared
-/// budget), A's lone subtree has a node with two parents (3 visits for 2 nodes). A's own walk
-/// (budget 4) ends normally; its lone walk (budget 2) runs out and answers from the scan of every
-/// pack (an unreferenced pack A hits).
+/// A node with two parents (3 visits for 2 nodes) under ray A's part of the tree, while rays B and
+/// C walk the other part: A's own walk (budget 4) ends normally and answers false; the stream's
+/// one budget for all rays runs out (the first version's held-back walk did, and answered from the
+/// scan of every pack, an unreferenced pack A hits), so every ray is answered by its own walk.
 #[test]
-fn lone_walk_spends_shared_budget() {
-    let miss = pack_of([
-        Vec3::new(100.0, 100.0, 100.0),
-        Vec3::new(101.0, 100.0, 100.0),
-        Vec3::new(100.0, 101.0, 100.0),
-    ]);
-    let hit = pack_of([
-        Vec3::new(-8.0, -8.0, 0.0),
-        Vec3::new(-2.0, -8.0, 0.0),
-        Vec3::new(-5.0, 8.0, 0.0),
-    ]);
-    let packs = vec![miss.packs()[0], hit.packs()[0]];
-    let node = |boxes: &[Aabb], kids: &[u32]| {
-        let mut n = Node8::empty();
-        n.bounds = AabbX8::from_boxes(boxes);
-        n.child = [EMPTY_CHILD; 8];
-        n.child[..kids.len()].copy_from_slice(kids);
-        n
-    };
+fn two_parents_spend_the_shared_budget() {
+    let packs = miss_and_hit_packs();
     let right = Aabb::new(Vec3::new(0.5, -10.0, -10.0), Vec3::splat(10.0));
     let left = Aabb::new(Vec3::splat(-10.0), Vec3::new(-0.5, 10.0, 10.0));
     let nodes = vec![
@@ -239,28 +235,11 @@ fn lone_walk_spends_shared_budget() {
     check(view, &rays, "shared budget");
 }
 
-/// Kills `checked_sub` -> `saturating_sub`: A's two lone subtrees (each with a node of two
-/// parents) fit the shared budget one by one but not together; A's own walk runs out of budget.
+/// Two parts of ray A's walk, each with a node of two parents, that fit the budget one by one but
+/// not together: A's own walk runs out of budget and answers from the scan of every pack (true).
 #[test]
-fn two_lone_walks_overspend_together() {
-    let miss = pack_of([
-        Vec3::new(100.0, 100.0, 100.0),
-        Vec3::new(101.0, 100.0, 100.0),
-        Vec3::new(100.0, 101.0, 100.0),
-    ]);
-    let hit = pack_of([
-        Vec3::new(-8.0, -8.0, 0.0),
-        Vec3::new(-2.0, -8.0, 0.0),
-        Vec3::new(-5.0, 8.0, 0.0),
-    ]);
-    let packs = vec![miss.packs()[0], hit.packs()[0]];
-    let node = |boxes: &[Aabb], kids: &[u32]| {
-        let mut n = Node8::empty();
-        n.bounds = AabbX8::from_boxes(boxes);
-        n.child = [EMPTY_CHILD; 8];
-        n.child[..kids.len()].copy_from_slice(kids);
-        n
-    };
+fn two_parts_overspend_the_budget_together() {
+    let packs = miss_and_hit_packs();
     let right = Aabb::new(Vec3::new(0.5, -10.0, -10.0), Vec3::splat(10.0));
     let left = Aabb::new(Vec3::splat(-10.0), Vec3::new(-0.5, 10.0, 10.0));
     let nodes = vec![
@@ -281,5 +260,5 @@ fn two_lone_walks_overspend_together() {
         Ray::new(Vec3::new(5.0, 1.0, -100.0), Vec3::Z),
     ];
     assert!(wide::occluded::<Moller, _, 8>(view, &rays[0])); // its own walk runs out: the scan
-    check(view, &rays, "two lone walks");
+    check(view, &rays, "two parts over budget");
 }

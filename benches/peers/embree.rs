@@ -254,6 +254,27 @@ unsafe extern "C" {
     fn rtcReleaseBVH(bvh: RTCBVH);
 }
 
+/// The rays `STREAM` at a time: each copied into Embree's layout by `make` (into a buffer of
+/// `empty`s on the stack), the stream traced by `trace`, then `read(i, &e)` for ray `i`.
+fn in_streams<E: Copy>(
+    rays: &[Ray],
+    empty: E,
+    make: impl Fn(&Ray) -> E,
+    mut trace: impl FnMut(&mut [E]),
+    mut read: impl FnMut(usize, &E),
+) {
+    let mut buf = [empty; STREAM];
+    for (k, chunk) in rays.chunks(STREAM).enumerate() {
+        for (b, r) in buf.iter_mut().zip(chunk) {
+            *b = make(r);
+        }
+        trace(&mut buf[..chunk.len()]);
+        for (i, b) in buf[..chunk.len()].iter().enumerate() {
+            read(k * STREAM + i, b);
+        }
+    }
+}
+
 /// Rays per call of Embree's stream API in [`Scene::intersect1m`] (Embree's own tutorials
 /// stream a tile's rays at a time; 256 is a 16 x 16 tile).
 pub const STREAM: usize = 256;
@@ -406,59 +427,59 @@ impl<'d> Scene<'d> {
                 inst_id: [0],
             },
         };
-        let mut buf = [empty; STREAM];
-        for (k, chunk) in rays.chunks(STREAM).enumerate() {
-            for (b, r) in buf.iter_mut().zip(chunk) {
-                *b = RTCRayHit {
-                    ray: Self::ray(r),
-                    ..empty
-                };
-            }
-            let mut ctx = context();
-            ctx.flags = coherent as c_uint;
-            // SAFETY: `buf` holds `chunk.len()` initialised, aligned RTCRayHits, each
-            // `size_of::<RTCRayHit>()` bytes after the last; the scene is live and committed.
-            unsafe {
-                rtcIntersect1M(
-                    self.scene,
-                    &mut ctx,
-                    buf.as_mut_ptr(),
-                    chunk.len() as c_uint,
-                    std::mem::size_of::<RTCRayHit>(),
-                )
-            };
-            for (i, b) in buf[..chunk.len()].iter().enumerate() {
+        in_streams(
+            rays,
+            empty,
+            |r| RTCRayHit {
+                ray: Self::ray(r),
+                ..empty
+            },
+            |buf| {
+                let mut ctx = context();
+                ctx.flags = coherent as c_uint;
+                // SAFETY: `buf` holds `buf.len()` initialised, aligned RTCRayHits, each
+                // `size_of::<RTCRayHit>()` bytes after the last; the scene is live and committed.
+                unsafe {
+                    rtcIntersect1M(
+                        self.scene,
+                        &mut ctx,
+                        buf.as_mut_ptr(),
+                        buf.len() as c_uint,
+                        std::mem::size_of::<RTCRayHit>(),
+                    )
+                }
+            },
+            |i, b| {
                 out(
-                    k * STREAM + i,
+                    i,
                     (b.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((b.ray.tfar, b.hit.prim_id)),
-                );
-            }
-        }
+                )
+            },
+        );
     }
 
     /// Embree's stream API for any-hit rays (`rtcOccluded1M`), as [`intersect1m`](Self::intersect1m).
     pub fn occluded1m(&self, rays: &[Ray], coherent: bool, mut out: impl FnMut(usize, bool)) {
-        let mut buf = [Self::ray(&Ray::new(Vec3::ZERO, Vec3::X)); STREAM];
-        for (k, chunk) in rays.chunks(STREAM).enumerate() {
-            for (b, r) in buf.iter_mut().zip(chunk) {
-                *b = Self::ray(r);
-            }
-            let mut ctx = context();
-            ctx.flags = coherent as c_uint;
-            // SAFETY: as in `intersect1m`, with RTCRays.
-            unsafe {
-                rtcOccluded1M(
-                    self.scene,
-                    &mut ctx,
-                    buf.as_mut_ptr(),
-                    chunk.len() as c_uint,
-                    std::mem::size_of::<RTCRay>(),
-                )
-            };
-            for (i, b) in buf[..chunk.len()].iter().enumerate() {
-                out(k * STREAM + i, b.tfar == f32::NEG_INFINITY);
-            }
-        }
+        in_streams(
+            rays,
+            Self::ray(&Ray::new(Vec3::ZERO, Vec3::X)),
+            Self::ray,
+            |buf| {
+                let mut ctx = context();
+                ctx.flags = coherent as c_uint;
+                // SAFETY: as in `intersect1m`, with RTCRays.
+                unsafe {
+                    rtcOccluded1M(
+                        self.scene,
+                        &mut ctx,
+                        buf.as_mut_ptr(),
+                        buf.len() as c_uint,
+                        std::mem::size_of::<RTCRay>(),
+                    )
+                }
+            },
+            |i, b| out(i, b.tfar == f32::NEG_INFINITY),
+        );
     }
 
     /// Eight rays as one packet: `(t, primitive)` per lane.

@@ -439,9 +439,9 @@ enum Group {
 }
 
 /// The largest extent of the tree's root box (its child boxes; empty slots have empty boxes):
-/// the scale of [`Group`]'s origin test; 0 for an empty tree.
+/// the scale of [`Group`]'s origin test and of the packets' coherence test; 0 for an empty tree.
 #[inline]
-fn root_extent<L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>) -> f32 {
+pub(crate) fn root_extent<L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>) -> f32 {
     let Some(root) = bvh.nodes.first() else {
         return 0.0;
     };
@@ -486,7 +486,7 @@ fn by_groups<T: TriangleTest, O>(
     out: &mut [O],
     extent: f32,
     mut packet: impl FnMut(&[Ray], &mut [O]),
-    mut single: impl FnMut(&[Ray], &mut [O]),
+    mut single: impl FnMut(&Ray) -> O,
     mut scattered: impl FnMut(&[Ray], &mut [O]),
 ) {
     let n = rays.len().min(out.len());
@@ -501,7 +501,9 @@ fn by_groups<T: TriangleTest, O>(
             if g == Group::Packet {
                 packet(&rays[at..end], &mut out[at..end]);
             } else {
-                single(&rays[at..end], &mut out[at..end]);
+                for (o, r) in out[at..end].iter_mut().zip(&rays[at..end]) {
+                    *o = single(r);
+                }
             }
             run = end;
         }
@@ -557,11 +559,7 @@ pub fn intersect_batch<T: TriangleTest, L: Lane, const N: usize>(
         hits,
         root_extent(bvh),
         |r, h| super::packet::intersect_packet::<T, L, N, f32x8, 8>(bvh, r, h, super::packet::DEFAULT_SWITCH),
-        |r, h| {
-            for (h, r) in h.iter_mut().zip(r) {
-                *h = intersect::<T, L, N>(bvh, r);
-            }
-        },
+        |r| intersect::<T, L, N>(bvh, r),
         |r, h| intersect_batch_incoherent::<T, L, N>(bvh, r, h),
     );
 }
@@ -596,18 +594,15 @@ pub fn occluded_batch<T: TriangleTest, L: Lane, const N: usize>(
     rays: &[Ray],
     occluded: &mut [bool],
 ) {
+    let streams = stream_fits(bvh);
     by_groups::<T, _>(
         rays,
         occluded,
         root_extent(bvh),
         |r, o| super::packet::occluded_packet::<T, L, N, f32x8, 8>(bvh, r, o, super::packet::DEFAULT_SWITCH),
+        |r| self::occluded::<T, L, N>(bvh, r),
         |r, o| {
-            for (o, r) in o.iter_mut().zip(r) {
-                *o = self::occluded::<T, L, N>(bvh, r);
-            }
-        },
-        |r, o| {
-            if stream_fits(bvh) {
+            if streams {
                 occluded_batch_stream::<T, L, N>(bvh, r, o);
             } else {
                 occluded_batch_incoherent::<T, L, N>(bvh, r, o);

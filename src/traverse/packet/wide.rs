@@ -136,15 +136,8 @@ impl<R: Lane> Slabs<R> {
         if spread == 0.0 {
             return true; // one origin (a camera)
         }
-        // The tree's extent: the root's child boxes (empty slots have empty boxes).
-        let Some(root) = bvh.nodes.first() else {
-            return false;
-        };
-        let mut extent = 0f32;
-        for a in 0..3 {
-            extent = extent.max(root.bounds.max[a].max_lane() - root.bounds.min[a].min_lane());
-        }
-        spread <= extent * super::COHERENT_MAX_ORIGIN_SPREAD
+        // The tree's extent (0 for an empty tree, where a spread above 0 fails).
+        spread <= crate::traverse::wide::root_extent(bvh) * super::COHERENT_MAX_ORIGIN_SPREAD
     }
 }
 
