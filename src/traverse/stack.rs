@@ -83,6 +83,51 @@ impl<const S: usize> Stack<S> {
     }
 }
 
+/// A stack of node codes alone (the any-hit walk's: no distances), with room for `S`.
+pub(crate) struct CodeStack<const S: usize> {
+    codes: [MaybeUninit<u32>; S],
+    len: usize,
+}
+
+impl<const S: usize> CodeStack<S> {
+    /// An empty stack (nothing is written).
+    #[inline(always)]
+    pub(crate) fn new() -> Self {
+        Self {
+            codes: [const { MaybeUninit::uninit() }; S],
+            len: 0,
+        }
+    }
+
+    /// Room left.
+    #[inline(always)]
+    pub(crate) fn room(&self) -> usize {
+        S - self.len
+    }
+
+    /// Pushes a code on top; the caller has checked [`room`](Self::room) (a full stack drops it,
+    /// never writes out of bounds).
+    #[inline(always)]
+    pub(crate) fn push(&mut self, code: u32) {
+        if let Some(slot) = self.codes.get_mut(self.len) {
+            *slot = MaybeUninit::new(code);
+            self.len += 1;
+        }
+    }
+
+    /// Pops the top code.
+    #[inline(always)]
+    pub(crate) fn pop(&mut self) -> Option<u32> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        // SAFETY: `len < S` here (it only grows in `push`, below `S`), and slot `len` (the old
+        // top) lies below the old `len`, so `push` wrote it.
+        Some(unsafe { self.codes.get_unchecked(self.len).assume_init() })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -113,5 +158,24 @@ mod tests {
         assert!(s.push(42, -1.0)); // on top, whatever its distance
         assert_eq!(s.pop(), Some((42, -1.0)));
         assert_eq!(s.pop(), Some((1, 1.0)));
+    }
+
+    #[test]
+    fn code_stack_push_pop_and_room() {
+        let mut s = CodeStack::<4>::new();
+        assert_eq!((s.room(), s.pop()), (4, None));
+        for c in [7, 8, 9] {
+            s.push(c);
+        }
+        assert_eq!((s.room(), s.pop()), (1, Some(9)));
+        s.push(10);
+        s.push(11);
+        assert_eq!(s.room(), 0);
+        s.push(12); // full: dropped, nothing written past the end
+        assert_eq!(s.room(), 0);
+        for c in [11, 10, 8, 7] {
+            assert_eq!(s.pop(), Some(c));
+        }
+        assert_eq!((s.room(), s.pop()), (4, None));
     }
 }
