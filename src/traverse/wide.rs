@@ -672,9 +672,11 @@ pub(crate) fn occluded_prepared_filtered<T: TriangleTest, L: Lane, const N: usiz
 /// One ray's whole any-hit walk in one loop, its state in locals (registers), where
 /// [`AnyHitWalk`] (the interleaved batches' form, advanced a step at a time) keeps it in memory:
 /// the same visits ([`any_hit_visit`]), so the same answer on every view.
-// PERF: against `AnyHitWalk` stepped to its end (BVH8, 131,072 shadow rays, best of 8 taking
-// turns; Intel Xeon): 1.04-1.07x on the 1M sphereflake, 1.01-1.04x on the bunny. The same loop
-// for closest hits measured 0.98-1.02x: not kept.
+// PERF: against `AnyHitWalk` stepped to its end (BVH8, 131,072 shadow rays; Intel Xeon; the
+// two builds run alternately, each run's best of 4, the best of 6 runs): 1.01-1.05x on the 1M
+// sphereflake, 1.00-1.06x on the bunny (two such comparisons; the machine's noise is about 5%).
+// The same loop for closest hits, also with the nearest child visited without the stack,
+// measured 0.97-1.02x on primary and diffuse rays: not kept.
 #[inline(always)]
 fn any_hit_walk<const S: usize, T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
     bvh: BvhWideRef<'_, L, N>,
