@@ -150,6 +150,9 @@ const _: () = assert!(core::mem::size_of::<Node8>() == 256);
 const _: () = assert!(core::mem::size_of::<TriangleLanes<f32x8, 8>>() == 8 * 4 * 9 + 8 * 4 + 32);
 
 impl<L: Lane, const N: usize> WideNode<L, N> {
+    /// One box lane per child slot: the traversals read child `i` for a hit in lane `i`.
+    const LANES_MATCH: () = assert!(L::N == N, "a wide node needs a lane type with N lanes");
+
     /// A node with every slot empty.
     ///
     /// ```
@@ -158,7 +161,16 @@ impl<L: Lane, const N: usize> WideNode<L, N> {
     /// assert!(n.child.iter().all(|&c| c == EMPTY_CHILD));
     /// assert!((0..8).all(|i| n.bounds.get(i).is_empty()));
     /// ```
+    ///
+    /// The lane type must have `N` lanes, one box per child slot (this is the only way to make a
+    /// node outside the crate, so every view's nodes have it):
+    ///
+    /// ```compile_fail
+    /// use strahl::{layout::WideNode, math::f32x8};
+    /// let n = WideNode::<f32x8, 4>::empty(); // 8 box lanes for 4 children: a compile error
+    /// ```
     pub fn empty() -> Self {
+        let () = Self::LANES_MATCH;
         Self {
             bounds: AabbLanes::empty(),
             child: [EMPTY_CHILD; N],
@@ -170,8 +182,9 @@ impl<L: Lane, const N: usize> WideNode<L, N> {
 /// A borrowed `N`-wide BVH: nodes (the root is `nodes[0]`) and the triangle packs the leaves refer
 /// to. Traversal ([`traverse::wide`](crate::traverse::wide)) works on this view, without `alloc`.
 ///
-/// Nothing is checked on construction: traversal never panics and always terminates on any
-/// slices (codes out of range are skipped, a tree deeper than [`MAX_WIDE_DEPTH`] loses the nodes
+/// Nothing is checked on construction (only that a node's lane type has `N` lanes, which
+/// [`WideNode::empty`] checks at compile time): traversal never panics and always terminates on
+/// any slices (codes out of range are skipped, a tree deeper than [`MAX_WIDE_DEPTH`] loses the nodes
 /// that do not fit on the stack). Trees from [`BvhWide::from_bvh2`] (and its parallel form) are
 /// always within bounds.
 ///

@@ -122,8 +122,8 @@ impl<const S: usize> CodeStack<S> {
             return None;
         }
         self.len -= 1;
-        // SAFETY: `len < S` here (it only grows in `push`, below `S`), and slot `len` (the old
-        // top) lies below the old `len`, so `push` wrote it.
+        // SAFETY: `len < S` here (`push` only grows it up to `S`, and it was just decremented),
+        // and slot `len` (the old top) lies below the old `len`, so `push` wrote it.
         Some(unsafe { self.codes.get_unchecked(self.len).assume_init() })
     }
 }
