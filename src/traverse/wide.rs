@@ -666,7 +666,22 @@ pub(crate) fn occluded_prepared_filtered<T: TriangleTest, L: Lane, const N: usiz
     if r.is_empty() || bvh.nodes.is_empty() {
         return false;
     }
-    any_hit_walk::<STACK, T, L, N, F>(bvh, r, f)
+    any_hit_walk::<STACK, T, L, N, F>(bvh, 0, r, f)
+}
+
+/// [`occluded_prepared`] in the subtree below child code `start` (`0`: the whole tree), for the
+/// packets' single rays, which leave the packet below the root.
+#[inline]
+pub(crate) fn occluded_prepared_from<T: TriangleTest, L: Lane, const N: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    start: u32,
+    r: &PreparedRay,
+) -> bool {
+    // From the root, exactly `occluded_prepared` (an empty tree answers `false`).
+    if r.is_empty() || (start == 0 && bvh.nodes.is_empty()) {
+        return false;
+    }
+    any_hit_walk::<STACK, T, L, N, _>(bvh, start, r, &mut AcceptAll)
 }
 
 /// One ray's whole any-hit walk in one loop, its state in locals (registers), where
@@ -680,11 +695,12 @@ pub(crate) fn occluded_prepared_filtered<T: TriangleTest, L: Lane, const N: usiz
 #[inline(always)]
 fn any_hit_walk<const S: usize, T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
     bvh: BvhWideRef<'_, L, N>,
+    start: u32,
     r: &PreparedRay,
     f: &mut F,
 ) -> bool {
     let mut stack = CodeStack::<S>::new();
-    let mut cur = 0u32;
+    let mut cur = start;
     let mut budget = bvh.nodes.len();
     loop {
         cur = match any_hit_visit::<S, T, L, N, F>(bvh, r, f, cur, &mut stack, &mut budget) {
@@ -1638,6 +1654,54 @@ mod tests {
     use super::{Group, group, occluded_stream};
     use crate::traverse::{Fast, Moller};
     use crate::{Ray, Vec3};
+
+    /// The walk from a child code (the packets' single rays): from the root it is
+    /// `occluded_prepared` (an empty tree answers `false` even with packs), from a child it
+    /// answers for that subtree alone.
+    #[test]
+    #[cfg(feature = "alloc")]
+    fn walks_from_a_child() {
+        use super::{occluded_prepared, occluded_prepared_from};
+        use crate::build::{BuildParams, Bvh2};
+        use crate::intersect::PreparedRay;
+        use crate::layout::{Bvh8, BvhWideRef, EMPTY_CHILD, LEAF_BIT};
+        let tri = |x: f32| {
+            [
+                Vec3::new(x, -1.0, 2.0),
+                Vec3::new(x + 1.0, -1.0, 2.0),
+                Vec3::new(x, 1.0, 2.0),
+            ]
+        };
+        let one = Bvh8::from_bvh2(
+            &Bvh2::build(&[tri(0.0)][..], &BuildParams::default()).unwrap().0,
+            &[tri(0.0)][..],
+        )
+        .unwrap();
+        let r = PreparedRay::new(&Ray::new(Vec3::new(0.2, 0.0, 0.0), Vec3::Z));
+        let no_nodes = BvhWideRef {
+            nodes: &[],
+            packs: one.packs(),
+        };
+        assert!(!occluded_prepared::<Moller, _, 8>(no_nodes, &r));
+        assert!(!occluded_prepared_from::<Moller, _, 8>(no_nodes, 0, &r));
+        assert!(occluded_prepared_from::<Moller, _, 8>(no_nodes, LEAF_BIT, &r)); // pack 0 itself
+        // Two far-apart groups of triangles: the ray hits the first only.
+        let tris: alloc::vec::Vec<_> = (0..40)
+            .map(|i| tri(if i < 20 { 0.0 } else { 100.0 } + 0.01 * i as f32))
+            .collect();
+        let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+        let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+        assert!(occluded_prepared::<Moller, _, 8>(b8.view(), &r));
+        assert!(occluded_prepared_from::<Moller, _, 8>(b8.view(), 0, &r));
+        let kids = b8.nodes()[0].child.iter().filter(|&&c| c != EMPTY_CHILD);
+        let from_kids: alloc::vec::Vec<bool> = kids
+            .map(|&c| occluded_prepared_from::<Moller, _, 8>(b8.view(), c, &r))
+            .collect();
+        assert!(
+            from_kids.len() >= 2 && from_kids.contains(&true) && from_kids.contains(&false),
+            "{from_kids:?}"
+        );
+    }
 
     /// Streams answer as single rays: 40 streams of 64 long rays from scattered points through a
     /// soup, some blocked and some not.

@@ -5,12 +5,10 @@ use super::leaf::{Leaves, any_rays, closest_rays};
 use super::stack::{Entry, MaskStack};
 use crate::geometry::{Hit, Ray};
 use crate::intersect::aabb::FAR_SLACK;
-use crate::intersect::aabb::intersect_aabb_lanes;
 use crate::intersect::{PreparedPacket, PreparedRay};
 use crate::layout::{BvhWideRef, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs};
 use crate::math::Lane;
 use crate::traverse::TriangleTest;
-use crate::traverse::stack::Stack;
 use crate::traverse::wide::intersect_from;
 
 /// Stack entries: enough for `MAX_WIDE_DEPTH` levels of 8-wide nodes.
@@ -458,60 +456,17 @@ fn masked_walk<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize
 }
 
 /// Any hit of the prepared ray `r` in the subtree below child code `start` (`0`: the whole
-/// tree), for the hybrid's single rays; the same loop and child order as
-/// [`wide::occluded_prepared`](crate::traverse::wide::occluded_prepared).
+/// tree), for the hybrid's single rays: the walk of
+/// [`wide::occluded_prepared`](crate::traverse::wide::occluded_prepared) from that child (`T` is
+/// the packets' conservative form, so its box test is the packets').
+#[inline]
 fn occluded_from<T: TriangleTest, L: Lane, const N: usize>(
     bvh: BvhWideRef<'_, L, N>,
     start: u32,
     r: &PreparedRay,
 ) -> bool {
-    if start == 0 {
-        return crate::traverse::wide::occluded_prepared::<T, L, N>(bvh, r);
-    }
-    if r.is_empty() {
-        return false;
-    }
-    let mut stack = Stack::<STACK>::new();
-    let mut cur = start;
-    let mut budget = bvh.nodes.len();
-    let scan = |r: &PreparedRay| bvh.packs.iter().any(|p| T::hit_mask_lanes(r, p) != 0);
-    loop {
-        if cur & LEAF_BIT == 0 {
-            if budget == 0 {
-                return scan(r);
-            }
-            budget -= 1;
-            if let Some(node) = bvh.nodes.get(cur as usize) {
-                let (_, mut mask) = intersect_aabb_lanes(r, &node.bounds);
-                if mask != 0 {
-                    if mask & (mask - 1) == 0 {
-                        cur = node.child[mask.trailing_zeros() as usize];
-                        continue;
-                    }
-                    // Slot order, the lowest popped first (see `wide::occluded_prepared`).
-                    while mask != 0 {
-                        let i = 31 - mask.leading_zeros() as usize;
-                        mask &= !(1 << i);
-                        crate::traverse::wide::prefetch(bvh, node.child[i]);
-                        if !stack.push(node.child[i], 0.0) {
-                            return scan(r);
-                        }
-                    }
-                }
-            }
-        } else if cur != EMPTY_CHILD {
-            let (first, count) = leaf_packs(cur);
-            if let Some(packs) = bvh.packs.get(first..first + count)
-                && packs.iter().any(|p| T::hit_mask_lanes(r, p) != 0)
-            {
-                return true;
-            }
-        }
-        match stack.pop() {
-            None => return false,
-            Some((code, _)) => cur = code,
-        }
-    }
+    debug_assert!(T::CONSERVATIVE_BOXES);
+    crate::traverse::wide::occluded_prepared_from::<T, L, N>(bvh, start, r)
 }
 
 /// The state of one masked walk: the packet, its sign lanes, the same rays as single rays (for the
