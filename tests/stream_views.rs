@@ -35,6 +35,14 @@ fn miss_and_hit_packs() -> Vec<strahl::intersect::TriangleLanes<strahl::math::f3
     vec![miss.packs()[0], hit.packs()[0]]
 }
 /// A node with the boxes `boxes` in its first slots and the children `kids`, the rest empty.
+/// Two parallel rays along +z, at x = -1 and x = 1.
+fn two_rays() -> [Ray; 2] {
+    [
+        Ray::new(Vec3::new(-1.0, 0.0, -100.0), Vec3::Z),
+        Ray::new(Vec3::new(1.0, 0.0, -100.0), Vec3::Z),
+    ]
+}
+
 fn node(boxes: &[Aabb], kids: &[u32]) -> Node8 {
     let mut n = Node8::empty();
     n.bounds = AabbX8::from_boxes(boxes);
@@ -82,10 +90,7 @@ fn stream_empty_slots_with_boxes() {
         nodes: &nodes,
         packs: &packs,
     };
-    let rays = [
-        Ray::new(Vec3::new(-1.0, 0.0, -100.0), Vec3::Z),
-        Ray::new(Vec3::new(1.0, 0.0, -100.0), Vec3::Z),
-    ];
+    let rays = two_rays();
     check(view, &rays, "empty slots");
 }
 
@@ -180,10 +185,7 @@ fn stream_off_by_one() {
         nodes: &nodes,
         packs: &packs,
     };
-    let rays = [
-        Ray::new(Vec3::new(-1.0, 0.0, -100.0), Vec3::Z),
-        Ray::new(Vec3::new(1.0, 0.0, -100.0), Vec3::Z),
-    ];
+    let rays = two_rays();
     check(view, &rays, "off by one");
 }
 /// The same views through the packet path of the adaptive batches (8 coherent rays).

@@ -663,25 +663,34 @@ pub(crate) fn occluded_prepared_filtered<T: TriangleTest, L: Lane, const N: usiz
     r: &PreparedRay,
     f: &mut F,
 ) -> bool {
-    if r.is_empty() || bvh.nodes.is_empty() {
-        return false;
-    }
-    any_hit_walk::<STACK, T, L, N, F>(bvh, 0, r, f)
+    occluded_from_filtered::<T, L, N, F>(bvh, 0, r, f)
 }
 
 /// [`occluded_prepared`] in the subtree below child code `start` (`0`: the whole tree), for the
-/// packets' single rays, which leave the packet below the root.
+/// packets' single rays, which leave the packet below the root (the packets pass their
+/// conservative `T`, so the box test is theirs).
 #[inline]
 pub(crate) fn occluded_prepared_from<T: TriangleTest, L: Lane, const N: usize>(
     bvh: BvhWideRef<'_, L, N>,
     start: u32,
     r: &PreparedRay,
 ) -> bool {
-    // From the root, exactly `occluded_prepared` (an empty tree answers `false`).
+    occluded_from_filtered::<T, L, N, _>(bvh, start, r, &mut AcceptAll)
+}
+
+/// The any-hit walk from child code `start` counting the hits `f` accepts; an empty ray, or an
+/// empty tree walked from its root, answers `false`.
+#[inline]
+fn occluded_from_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+    bvh: BvhWideRef<'_, L, N>,
+    start: u32,
+    r: &PreparedRay,
+    f: &mut F,
+) -> bool {
     if r.is_empty() || (start == 0 && bvh.nodes.is_empty()) {
         return false;
     }
-    any_hit_walk::<STACK, T, L, N, _>(bvh, start, r, &mut AcceptAll)
+    any_hit_walk::<STACK, T, L, N, F>(bvh, start, r, f)
 }
 
 /// One ray's whole any-hit walk in one loop, its state in locals (registers), where
@@ -738,9 +747,11 @@ fn any_hit_visit<const S: usize, T: TriangleTest, L: Lane, const N: usize, F: Hi
     stack: &mut CodeStack<S>,
     budget: &mut usize,
 ) -> AnyHitNext {
+    // The answer for views that cannot be walked: every pack's.
+    let scan = |f: &mut F| AnyHitNext::Answer(bvh.packs.iter().any(|p| any_in_pack::<T, L, N, F>(r, p, f)));
     if cur & LEAF_BIT == 0 {
         if *budget == 0 {
-            return AnyHitNext::Answer(bvh.packs.iter().any(|p| any_in_pack::<T, L, N, F>(r, p, f)));
+            return scan(f);
         }
         *budget -= 1;
         if let Some(node) = bvh.nodes.get(cur as usize) {
@@ -751,7 +762,7 @@ fn any_hit_visit<const S: usize, T: TriangleTest, L: Lane, const N: usize, F: Hi
                 if mask != 0 {
                     // Room for all of them, the next one too (as the stack's bound assumes).
                     if mask.count_ones() as usize >= stack.room() {
-                        return AnyHitNext::Answer(bvh.packs.iter().any(|p| any_in_pack::<T, L, N, F>(r, p, f)));
+                        return scan(f);
                     }
                     prefetch(bvh, next);
                     while mask != 0 {

@@ -9,7 +9,7 @@ use crate::intersect::{PreparedPacket, PreparedRay};
 use crate::layout::{BvhWideRef, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs};
 use crate::math::Lane;
 use crate::traverse::TriangleTest;
-use crate::traverse::wide::intersect_from;
+use crate::traverse::wide::{intersect_from, occluded_prepared_from};
 
 /// Stack entries: enough for `MAX_WIDE_DEPTH` levels of 8-wide nodes.
 const STACK: usize = MAX_WIDE_DEPTH as usize * 7 + 1;
@@ -416,7 +416,7 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
-            if occluded_from::<T, L, N>(bvh, 0, &single[i]) {
+            if occluded_prepared_from::<T, L, N>(bvh, 0, &single[i]) {
                 mask |= 1 << i;
             }
         }
@@ -455,20 +455,6 @@ fn masked_walk<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize
     .run::<T, L, N, ANY>(bvh, active, switch)
 }
 
-/// Any hit of the prepared ray `r` in the subtree below child code `start` (`0`: the whole
-/// tree), for the hybrid's single rays: the walk of
-/// [`wide::occluded_prepared`](crate::traverse::wide::occluded_prepared) from that child (`T` is
-/// the packets' conservative form, so its box test is the packets').
-#[inline]
-fn occluded_from<T: TriangleTest, L: Lane, const N: usize>(
-    bvh: BvhWideRef<'_, L, N>,
-    start: u32,
-    r: &PreparedRay,
-) -> bool {
-    debug_assert!(T::CONSERVATIVE_BOXES);
-    crate::traverse::wide::occluded_prepared_from::<T, L, N>(bvh, start, r)
-}
-
 /// The state of one masked walk: the packet, its sign lanes, the same rays as single rays (for the
 /// hybrid), the leaf kernels' hit lanes and the closest hits so far.
 struct Walk<'a, R, const K: usize> {
@@ -494,7 +480,7 @@ impl<R: Lane, const K: usize> Walk<'_, R, K> {
             let i = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             if ANY {
-                if occluded_from::<T, L, N>(bvh, code, &self.single[i]) {
+                if occluded_prepared_from::<T, L, N>(bvh, code, &self.single[i]) {
                     occluded |= 1 << i;
                 }
             } else if let Some(h) = intersect_from::<T, L, N>(bvh, code, &mut self.single[i]) {
@@ -772,7 +758,7 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                 let i = m.trailing_zeros() as usize;
                 m &= m - 1;
                 if ANY {
-                    if occluded_from::<T, L, N>(bvh, 0, &single[i]) {
+                    if occluded_prepared_from::<T, L, N>(bvh, 0, &single[i]) {
                         occluded |= 1 << i;
                     }
                 } else if let Some(h) = intersect_from::<T, L, N>(bvh, 0, &mut single[i]) {
