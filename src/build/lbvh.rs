@@ -16,9 +16,9 @@
 //! Two implementations of steps 2 to 4 build the same tree (tested):
 //!
 //! - **30-bit codes, bottom-up** ([`bucketed30`], [`BottomUp`]; whenever [`bottom_up_ok`]: for
-//!   `BuildParams::fastest()` always). One stable counting pass on the top 8 code bits moves the
-//!   references into 256 buckets (sequential reads, one write stream per bucket); bucket by
-//!   bucket, the keys `(code, position)` are sorted in cache (two 11-bit LSD passes) and the
+//!   `BuildParams::fastest()` always). One stable counting pass on the top 6 code bits moves the
+//!   references into 64 buckets (sequential reads, one write stream per bucket); bucket by
+//!   bucket, the keys `(code, position)` are sorted in cache (three 8-bit LSD passes) and the
 //!   references fed in that order to a one-pass bottom-up construction: the split of a range is
 //!   its boundary of largest "separator" (highest differing bit), so the hierarchy is the
 //!   Cartesian tree of the separators, which a stack builds left to right (as Apetrei, "Fast and
@@ -215,8 +215,14 @@ fn hierarchy<K: Code>(
     c
 }
 
-/// Bits of the top digit that [`sort_gather30`] buckets by (256 buckets).
-const TOP_BITS: u32 = 8;
+/// Bits of the top digit that [`sort_gather30`] and [`bucketed30`] bucket by (64 buckets).
+// PERF: 1M soup, `fastest()`, Intel Xeon (2026-12-06; phases timed by hand, best of 7 builds,
+// three binaries taking turns three times): with 256 buckets the scatter of the 32-byte
+// references took 17.9-18.5 ms, with 128 buckets 17.4, with 64 buckets 5.0-6.1 (64 write streams
+// stay in the L1 cache's reach). The buckets (about 16,000 references, 512 KB) are still sorted
+// in the 2 MB L2 cache: their phase grew from 24.3-24.9 ms to 26.8-28.0, and the whole build went
+// from 56.0-57.2 ms to 45.4-47.7.
+const TOP_BITS: u32 = 6;
 
 /// Sorts `refs` by the 30-bit Morton codes of their doubled centroids (quantised by `q`) without
 /// random reads over all of `refs`:
@@ -226,7 +232,7 @@ const TOP_BITS: u32 = 8;
 /// 2. One stable counting pass on the top digit moves the references into `alt` (sequential
 ///    reads, one write stream per bucket); each one's code travels along in its lane 7
 ///    ([`PrimRef::with_tag`]).
-/// 3. Each bucket (a few thousand references on an even scene, in cache) is sorted by
+/// 3. Each bucket (about 16,000 references of a 1M-triangle even scene, in the L2 cache) is sorted by
 ///    `(code, position)` and gathered back into `refs`, lane 7 cleared.
 ///
 /// The order is that of a stable sort by code. On return `items` holds the sorted codes (values:
@@ -511,24 +517,28 @@ fn each_code30(refs: &[PrimRef], q: &MortonQuantizer, mut f: impl FnMut(usize, u
 
 /// Sorts one bucket of [`sort_gather30`]: `(code << 32) | position` keys whose codes share their
 /// top [`TOP_BITS`] bits. Positions are in increasing order on entry, so a stable sort by the
-/// low `30 - TOP_BITS` code bits is a sort by value: two LSD counting passes of 11 bits (one read
-/// for both histograms), or `sort_unstable` for short buckets. `tmp` is scratch.
+/// low `30 - TOP_BITS` code bits is a sort by value: three LSD counting passes of 8 bits (one read
+/// for the three histograms), or `sort_unstable` for short buckets. The sorted keys end in `keys`
+/// (the two vectors may have been swapped); `tmp` is scratch.
 // PERF: measured on the 1M soup (buckets of about 4,000, under load): the bucket phase of
-// `sort_gather30` took 25 ms with `sort_unstable` on every bucket, 18 ms with these two passes.
-fn sort_bucket(keys: &mut [u64], tmp: &mut Vec<u64>) {
-    const W: u32 = 11;
+// `sort_gather30` took 25 ms with `sort_unstable` on every bucket, 18 ms with two 11-bit passes.
+// With buckets of about 16,000 (2026-12-06, Intel Xeon): two 12-bit passes 7.3-7.5 ms, these
+// three 8-bit passes 6.1-6.5 ms (4,096 destinations per pass scatter worse than 256).
+fn sort_bucket(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
+    const W: u32 = 8;
     const B: usize = 1 << W;
-    const _: () = assert!(2 * W >= 30 - TOP_BITS);
+    const _: () = assert!(3 * W >= 30 - TOP_BITS);
     let m = keys.len();
     if m <= 256 {
         keys.sort_unstable();
         return;
     }
-    let mut hist = [[0u32; B]; 2];
+    let mut hist = [[0u32; B]; 3];
     let digit = |k: u64, pass: u32| (k >> (32 + pass * W)) as usize & (B - 1);
     for &k in keys.iter() {
-        hist[0][digit(k, 0)] += 1;
-        hist[1][digit(k, 1)] += 1;
+        for (pass, h) in (0..).zip(hist.iter_mut()) {
+            h[digit(k, pass)] += 1;
+        }
     }
     tmp.resize(m, 0);
     for h in hist.iter_mut() {
@@ -540,23 +550,23 @@ fn sort_bucket(keys: &mut [u64], tmp: &mut Vec<u64>) {
             sum += v;
         }
     }
-    // Into `tmp` by the low digit, back into `keys` by the high one.
-    let [h0, h1] = &mut hist;
-    for &k in keys.iter() {
-        let slot = &mut h0[digit(k, 0)];
-        // `*slot < m`: the prefix sums of a histogram of m keys.
-        if let Some(d) = tmp.get_mut(*slot as usize) {
-            *d = k;
+    // Into `tmp`, back into `keys`, into `tmp` again; then the two swap.
+    for (pass, h) in (0..).zip(hist.iter_mut()) {
+        let (from, to) = if pass == 1 {
+            (&*tmp, &mut *keys)
+        } else {
+            (&*keys, &mut *tmp)
+        };
+        for &k in from.iter() {
+            let slot = &mut h[digit(k, pass)];
+            // `*slot < m`: the prefix sums of a histogram of m keys.
+            if let Some(d) = to.get_mut(*slot as usize) {
+                *d = k;
+            }
+            *slot += 1;
         }
-        *slot += 1;
     }
-    for &k in tmp.iter() {
-        let slot = &mut h1[digit(k, 1)];
-        if let Some(d) = keys.get_mut(*slot as usize) {
-            *d = k;
-        }
-        *slot += 1;
-    }
+    core::mem::swap(keys, tmp);
 }
 
 /// The LBVH over `sorted` references whose codes are `codes` (as [`hierarchy`] after its
@@ -920,7 +930,7 @@ impl BottomUp {
 /// 2. One stable counting pass on that digit moves the references into `alt` (sequential reads,
 ///    one write stream per bucket); each one's code travels in its lane 7
 ///    ([`PrimRef::with_tag`]).
-/// 3. Bucket by bucket (a few thousand references on an even scene): a sequential read of its
+/// 3. Bucket by bucket (about 16,000 references of a 1M-triangle even scene): a sequential read of its
 ///    references makes the keys `(code << 32) | position in the bucket` and brings them into the
 ///    cache; [`sort_bucket`] sorts the keys; the references are fed to [`BottomUp`] in that
 ///    order, from the cache.
