@@ -1098,6 +1098,7 @@ fn build_threads(c: &mut Criterion) {
     g.warm_up_time(Duration::from_millis(500));
     g.measurement_time(Duration::from_secs(4));
     let presets = [
+        ("fastest", BuildParams::fastest()),
         ("fast", BuildParams::fast()),
         ("balanced", BuildParams::balanced()),
         ("high", BuildParams::high()),

@@ -215,6 +215,17 @@ fn large_scenes_split_wide() {
         ("balanced", BuildParams::balanced()),
         // Its Morton codes, scatter and bucket sorts run on the threads too.
         ("hybrid_sah", BuildParams::hybrid_sah()),
+        // The bottom-up LBVH: its buckets built side by side, then joined (190,000 references:
+        // 2 threads and more take the parallel path).
+        ("fastest", BuildParams::fastest()),
+        (
+            "fastest_leaves_3",
+            BuildParams {
+                min_leaf_size: 3,
+                max_leaf_size: 6,
+                ..BuildParams::fastest()
+            },
+        ),
         (
             "hlbvh",
             BuildParams {

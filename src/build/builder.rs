@@ -78,6 +78,9 @@ pub struct Builder {
     /// The parallel build's per-worker arrays (`std`).
     #[cfg(feature = "std")]
     pub(crate) par: Vec<super::topdown::ParScratch>,
+    /// The parallel LBVH's nodes, one array per top-digit bucket (`std`).
+    #[cfg(feature = "std")]
+    pub(crate) bucket_nodes: Vec<Vec<crate::traverse::Node>>,
 }
 
 /// Builds of at most this many (valid) primitives run on the calling thread.
@@ -177,7 +180,10 @@ impl Builder {
     /// each splitting every large task once, the round's tasks side by side, or, while there are
     /// at most half as many tasks as threads, each binned task with all threads, its references
     /// in chunks;
-    /// then the remaining subtrees side by side) and the HLBVH ([`Strategy::Hlbvh`],
+    /// then the remaining subtrees side by side), the LBVH ([`Strategy::Lbvh`] with 30-bit codes:
+    /// the Morton codes and the top-digit scatter in chunks side by side, then each top-digit
+    /// bucket's subtree, which the joins across buckets put together on the calling thread; the
+    /// same nodes in the same order as the single-threaded build) and the HLBVH ([`Strategy::Hlbvh`],
     /// [`Strategy::HlbvhSah`]: with 30-bit codes, the Morton codes, the top-digit scatter and the
     /// bucket sorts in chunks side by side; the SAH mini-trees side by side), and the first
     /// round of rotations ([`Refine::Rotations`]: subtrees side by side, then the nodes above
@@ -229,7 +235,7 @@ impl Builder {
             match params.strategy {
                 Strategy::Median | Strategy::BinnedSah => topdown::build(self, info, params, out, threads),
                 Strategy::SweepSah => sweep::build(self, info, params, out),
-                Strategy::Lbvh => lbvh::build(self, info, params, out),
+                Strategy::Lbvh => lbvh::build(self, info, params, out, threads),
                 Strategy::Hlbvh | Strategy::HlbvhSah => hlbvh::build(self, info, params, out, threads),
                 Strategy::Ploc => ploc::build(self, info, params, out),
             }
