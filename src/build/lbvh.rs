@@ -1325,14 +1325,11 @@ mod tests {
         assert_eq!(bits(&refs), bits(&want_sorted), "lane 7 must be cleared");
     }
 
-    /// The parallel front end gives the sequential one's codes, references (bit for bit) and
-    /// primitive indices, on spread, gridded and clustered boxes and thread counts that leave
-    /// ragged last chunks.
+    /// `n` small boxes spread over a cube, the same snapped to a grid (many equal codes), and the
+    /// spread boxes shrunk to a tight cluster with one far outlier (`n + 1` boxes).
     #[cfg(feature = "std")]
-    #[test]
-    fn sort_gather30_par_matches_sequential() {
-        let mut r = Rng::new(12);
-        let n = 200_003;
+    fn large_scenes(n: usize, seed: u64) -> [Vec<Aabb>; 3] {
+        let mut r = Rng::new(seed);
         let spread: Vec<Aabb> = (0..n)
             .map(|_| {
                 let p = Vec3::new(r.range(-1.0, 1.0), r.range(-1.0, 1.0), r.range(-1.0, 1.0));
@@ -1348,6 +1345,16 @@ mod tests {
             .collect();
         let mut cluster: Vec<Aabb> = spread.iter().map(|a| Aabb::new(a.min * 1e-3, a.max * 1e-3)).collect();
         cluster.push(Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0)));
+        [spread, grid, cluster]
+    }
+
+    /// The parallel front end gives the sequential one's codes, references (bit for bit) and
+    /// primitive indices, on spread, gridded and clustered boxes and thread counts that leave
+    /// ragged last chunks.
+    #[cfg(feature = "std")]
+    #[test]
+    fn sort_gather30_par_matches_sequential() {
+        let [spread, grid, cluster] = large_scenes(200_003, 12);
         for boxes in [&spread, &grid, &cluster] {
             let mut refs = Vec::new();
             let info = prepare(&boxes[..], &mut refs).unwrap();
@@ -1388,27 +1395,12 @@ mod tests {
     #[test]
     fn bucketed30_par_matches_sequential() {
         use crate::build::Builder;
-        let mut r = Rng::new(21);
         let n = 140_001;
-        let spread: Vec<Aabb> = (0..n)
-            .map(|_| {
-                let p = Vec3::new(r.range(-1.0, 1.0), r.range(-1.0, 1.0), r.range(-1.0, 1.0));
-                Aabb::new(p, p + Vec3::splat(0.01))
-            })
-            .collect();
-        let grid: Vec<Aabb> = spread
-            .iter()
-            .map(|a| {
-                let p = (a.min * 3.0).round();
-                Aabb::new(p, p + Vec3::ONE)
-            })
-            .collect();
+        let [spread, grid, cluster] = large_scenes(n, 21);
         let same = vec![Aabb::new(Vec3::ZERO, Vec3::ONE); n];
-        let mut cluster: Vec<Aabb> = spread.iter().map(|a| Aabb::new(a.min * 1e-3, a.max * 1e-3)).collect();
-        cluster.push(Aabb::new(Vec3::splat(100.0), Vec3::splat(101.0)));
         // A cluster at one corner and three boxes along the diagonal, each alone in its cell of
         // the 4 x 4 x 4 top-digit grid: buckets of one box, whose leaf candidates join.
-        let mut lone: Vec<Aabb> = spread.iter().map(|a| Aabb::new(a.min * 1e-3, a.max * 1e-3)).collect();
+        let mut lone = cluster[..n].to_vec();
         for x in [30.0, 55.0, 80.0] {
             lone.push(Aabb::new(Vec3::splat(x), Vec3::splat(x + 0.5)));
         }
