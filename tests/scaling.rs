@@ -5,8 +5,8 @@
 //! `STRAHL_THREADS_LIST=1,2,4,8,16 cargo test --release --test scaling -- --ignored --nocapture`
 //! prints one markdown table per scene (`STRAHL_SCENE`: `soup`, the 1M thin soup (default), or
 //! `sphereflake`, 1M triangles; `all` for both): best of `STRAHL_REPS` (default 3) wall-clock
-//! milliseconds and the speed-up over one thread, for `Builder::build_into_par` with `fast()`,
-//! `balanced()`, `hybrid_sah()` and `median()` (warm builder), `Bvh8::from_bvh2_par` of the
+//! milliseconds and the speed-up over one thread, for `Builder::build_into_par` with `fastest()`,
+//! `fast()`, `balanced()`, `high()`, `hybrid_sah()` and `median()` (warm builder), `Bvh8::from_bvh2_par` of the
 //! `balanced()` tree, and `intersect_batch_par` / `occluded_batch_par` of the BVH8 over 262,144 diffuse
 //! rays (closest hit) and 262,144 shadow rays (any hit, towards random points in the scene's box),
 //! watertight triangle test. The thread counts take turns within each repetition.
@@ -74,6 +74,7 @@ fn run_scene(name: &str, tris: &[Triangle], list: &[usize], reps: usize) {
     let shadow = shadow_rays(tris, rays_n);
     // Rows: (label, per-thread-count best seconds).
     let builders = [
+        ("build `fastest()`", BuildParams::fastest()),
         ("build `fast()`", BuildParams::fast()),
         ("build `balanced()`", BuildParams::balanced()),
         ("build `high()`", BuildParams::high()),
