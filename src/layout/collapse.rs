@@ -70,26 +70,29 @@ struct Builder<'a, L, const N: usize, P: ?Sized> {
     depth: u32,
 }
 
+/// `true` if some triangle is referenced twice by `bvh`'s leaves (spatial splits). Exact:
+/// invalid triangles can keep the count of references low.
+fn has_repeats<P: Triangles + ?Sized>(bvh: &Bvh2, tris: &P) -> bool {
+    let mut seen = vec![0u64; tris.len().div_ceil(64)];
+    bvh.prim_indices.iter().any(|&p| {
+        let (w, b) = (p as usize / 64, 1u64 << (p % 64));
+        seen.get_mut(w).is_some_and(|x| core::mem::replace(x, *x | b) & b != 0)
+    })
+}
+
 fn half_area(b: &Aabb) -> f32 {
     if b.is_empty() { -1.0 } else { b.half_area() }
 }
 
 impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
-    /// A builder with empty output arrays.
-    fn new(bvh: &'a Bvh2, tris: &'a P, counts: &'a [u32], plan: &'a Plan) -> Self {
+    /// A builder with empty output arrays; `repeats`: [`has_repeats`] of the tree.
+    fn new(bvh: &'a Bvh2, tris: &'a P, counts: &'a [u32], plan: &'a Plan, repeats: bool) -> Self {
         Self {
             bvh,
             tris,
             counts,
             plan,
-            repeats: {
-                // Exact: some triangle referenced twice (invalid triangles can keep the count low).
-                let mut seen = vec![0u64; tris.len().div_ceil(64)];
-                bvh.prim_indices.iter().any(|&p| {
-                    let (w, b) = (p as usize / 64, 1u64 << (p % 64));
-                    seen.get_mut(w).is_some_and(|x| core::mem::replace(x, *x | b) & b != 0)
-                })
-            },
+            repeats,
             nodes: Vec::new(),
             packs: Vec::new(),
             #[cfg(feature = "std")]
@@ -795,7 +798,7 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         } else {
             Plan::new(bvh, counts, N)?
         };
-        let mut b = Builder::<L, N, P>::new(bvh, tris, counts, &plan);
+        let mut b = Builder::<L, N, P>::new(bvh, tris, counts, &plan, has_repeats(bvh, tris));
         if !bvh.nodes.is_empty() {
             // PERF: large trees on transparent huge pages (feature `hugepages`, Linux; see
             // `layout::pages`): fewer TLB misses in traversal, results unchanged. The arrays are
@@ -848,7 +851,11 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
             return Self::collapse_counted::<P, false>(bvh, tris, &counts);
         }
         let plan = Plan::new(bvh, &counts, N)?;
-        let builder = || Builder::<L, N, P>::new(bvh, tris, &counts, &plan);
+        // PERF: the repeat scan (a pass over every primitive index) once, not once per worker's
+        // builder: each subtree's builder made it again, twice per job, and the collapse of the
+        // 1M soup's tree took as long on 2 threads as on 1.
+        let repeats = has_repeats(bvh, tris);
+        let builder = || Builder::<L, N, P>::new(bvh, tris, &counts, &plan, repeats);
         // The top on this thread, down to subtrees of at most `grain` triangles.
         let grain = (total / threads.saturating_mul(8)).max(PAR_GRAIN);
         let mut top = builder();
