@@ -1008,7 +1008,8 @@ mod tests {
             let (b2, _) = Bvh2::build_spatial(&tris[..], &crate::build::BuildParams::default(), &sp).unwrap();
             let counts = subtree_counts(&b2).unwrap();
             let plan = Plan::new(&b2, &counts, 8).unwrap();
-            let mut b = Builder::<crate::math::f32x8, 8, _>::new(&b2, &tris[..], &counts, &plan);
+            let mut b =
+                Builder::<crate::math::f32x8, 8, _>::new(&b2, &tris[..], &counts, &plan, has_repeats(&b2, &tris[..]));
             let want = b.sizes(0).unwrap();
             b.run(0).unwrap();
             assert_eq!(want, (b.nodes.len(), b.packs.len()), "{name}");
@@ -1243,7 +1244,7 @@ mod tests {
                     } else {
                         Plan::new(bvh, counts, N).unwrap()
                     };
-                    let mut b = Builder::<L, N, [Triangle]>::new(bvh, tris, counts, &plan);
+                    let mut b = Builder::<L, N, [Triangle]>::new(bvh, tris, counts, &plan, has_repeats(bvh, tris));
                     let want = b.sizes(0).unwrap();
                     b.run(0).unwrap();
                     assert_eq!(want, (b.nodes.len(), b.packs.len()), "N = {N}, greedy {greedy}");
