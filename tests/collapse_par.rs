@@ -7,7 +7,7 @@ mod common;
 use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::Triangle;
 use strahl::intersect::TriangleLanes;
-use strahl::layout::{BvhWide, EMPTY_CHILD, LEAF_BIT, leaf_packs};
+use strahl::layout::{BvhWide, Collapser, EMPTY_CHILD, LEAF_BIT, leaf_packs};
 use strahl::math::{Lane, f32x4, f32x8};
 use strahl::scene;
 use strahl::traverse::{Moller, Watertight};
@@ -77,6 +77,24 @@ fn same_tree<L: Lane, const N: usize>(a: &BvhWide<L, N>, b: &BvhWide<L, N>) -> R
     Ok(())
 }
 
+/// A wide tree as plain data, numbering included: each node's child box bits and child codes,
+/// and every pack.
+type Raw<const N: usize> = (Vec<(Vec<u32>, [u32; N])>, Vec<(Vec<u32>, [u32; N], u32)>);
+fn raw<L: Lane, const N: usize>(w: &BvhWide<L, N>) -> Raw<N> {
+    let nodes = w
+        .nodes()
+        .iter()
+        .map(|n| {
+            let b = n.bounds.min.iter().chain(&n.bounds.max);
+            (
+                b.flat_map(|l| (0..N).map(move |i| l.lane(i).to_bits())).collect(),
+                n.child,
+            )
+        })
+        .collect();
+    (nodes, w.packs().iter().map(pack_key).collect())
+}
+
 /// Both widths and several thread counts against the single-threaded collapse of `bvh`.
 fn check(name: &str, tris: &[Triangle], bvh: &Bvh2) {
     fn width<L: Lane + Send + Sync, const N: usize>(name: &str, tris: &[Triangle], bvh: &Bvh2) {
@@ -87,20 +105,6 @@ fn check(name: &str, tris: &[Triangle], bvh: &Bvh2) {
             let par = BvhWide::<L, N>::from_bvh2_par(bvh, tris, threads).unwrap();
             same_tree(&seq, &par).unwrap_or_else(|e| panic!("{what}: {e}"));
             let again = BvhWide::<L, N>::from_bvh2_par(bvh, tris, threads).unwrap();
-            let raw = |w: &BvhWide<L, N>| {
-                let nodes: Vec<(Vec<u32>, [u32; N])> = w
-                    .nodes()
-                    .iter()
-                    .map(|n| {
-                        let b = n.bounds.min.iter().chain(&n.bounds.max);
-                        (
-                            b.flat_map(|l| (0..N).map(move |i| l.lane(i).to_bits())).collect(),
-                            n.child,
-                        )
-                    })
-                    .collect();
-                (nodes, w.packs().iter().map(pack_key).collect::<Vec<_>>())
-            };
             assert!(raw(&again) == raw(&par), "{what}: not reproducible");
             for ray in &rays {
                 assert_eq!(
@@ -263,4 +267,62 @@ fn errors_are_the_single_threaded_ones() {
     let a = BvhWide::<f32x8, 8>::from_bvh2(&ok, &tris[..]).unwrap();
     let b = BvhWide::<f32x8, 8>::from_bvh2_par(&ok, &tris[..], 2).unwrap();
     same_tree(&a, &b).unwrap();
+}
+
+/// `Collapser::collapse_into` / `collapse_into_par` into one tree, frame after frame, over
+/// trees that grow, shrink and fail: each time the bytes of a fresh `from_bvh2` /
+/// `from_bvh2_par` (numbering included), the arrays kept where they were large enough, and an
+/// empty tree after an error.
+#[test]
+fn collapser_reuses_memory_and_matches_fresh_collapses() {
+    fn width<L: Lane + Send + Sync, const N: usize>() {
+        let scenes: Vec<(Vec<Triangle>, Bvh2)> = [40_000, 6_000, 40_000, 60_000, 30_000]
+            .into_iter()
+            .enumerate()
+            .map(|(i, n)| {
+                let tris = scene::thin_soup(n, i as u64 + 1);
+                let (b, _) = Bvh2::build(&tris[..], &BuildParams::fast()).unwrap();
+                (tris, b)
+            })
+            .collect();
+        let mut c = Collapser::new();
+        let mut out = BvhWide::<L, N>::from_bvh2(&scenes[0].1, &scenes[0].0[..]).unwrap();
+        let mut big_nodes = 0usize;
+        for (k, (tris, bvh)) in scenes.iter().enumerate() {
+            for threads in [1, 2, 5] {
+                let what = format!("{N}-wide, frame {k}, {threads} threads");
+                let (before, cap) = (out.nodes().as_ptr(), big_nodes);
+                let fits = out.nodes().len() >= BvhWide::<L, N>::from_bvh2(bvh, &tris[..]).unwrap().nodes().len();
+                if threads == 1 {
+                    c.collapse_into(bvh, &tris[..], &mut out).unwrap();
+                    let fresh = BvhWide::<L, N>::from_bvh2(bvh, &tris[..]).unwrap();
+                    assert!(raw(&out) == raw(&fresh) && out.depth() == fresh.depth(), "{what}");
+                } else {
+                    c.collapse_into_par(bvh, &tris[..], &mut out, threads).unwrap();
+                    let fresh = BvhWide::<L, N>::from_bvh2_par(bvh, &tris[..], threads).unwrap();
+                    assert!(raw(&out) == raw(&fresh) && out.depth() == fresh.depth(), "{what}");
+                }
+                // A tree that fits in the arrays of a larger one before it stays in them.
+                if fits && cap > 0 {
+                    assert_eq!(out.nodes().as_ptr(), before, "{what}: reallocated");
+                }
+                big_nodes = big_nodes.max(out.nodes().len());
+            }
+        }
+        // A malformed tree: an error, and an empty tree (that still traces: no hits).
+        let (tris, bvh) = &scenes[1];
+        let mut broken = bvh.clone();
+        broken.prim_indices[0] = tris.len() as u32;
+        assert!(c.collapse_into(&broken, &tris[..], &mut out).is_err());
+        assert!(out.nodes().is_empty() && out.packs().is_empty());
+        let ray = strahl::Ray::new(strahl::Vec3::splat(-1.0), strahl::Vec3::ONE);
+        assert!(out.intersect::<Moller>(&ray).is_none());
+        assert!(c.collapse_into_par(&broken, &tris[..], &mut out, 3).is_err());
+        assert!(out.nodes().is_empty());
+        // And whole again.
+        c.collapse_into_par(bvh, &tris[..], &mut out, 3).unwrap();
+        assert!(raw(&out) == raw(&BvhWide::<L, N>::from_bvh2_par(bvh, &tris[..], 3).unwrap()));
+    }
+    width::<f32x8, 8>();
+    width::<f32x4, 4>();
 }

@@ -45,6 +45,102 @@ impl core::fmt::Display for CollapseError {
 
 impl core::error::Error for CollapseError {}
 
+/// Memory for repeated collapses: the subtree counts and the cost-optimal collapse's table, kept
+/// between calls, as [`build::Builder`](crate::build::Builder) keeps the binary builders'. With
+/// [`collapse_into`](Self::collapse_into) the wide tree's own arrays are reused too, so an engine
+/// that rebuilds every frame touches no new memory once the arrays have grown (a first collapse
+/// faults in about 140 MB for a million triangles). Measured on the 1M soup's `balanced()` tree
+/// (2026-12-06, Intel Xeon, best of 8, two runs): `from_bvh2` 181.8 ms, `collapse_into` 172.1-172.3;
+/// `from_bvh2_par` on 2 threads 124.3-125.7, `collapse_into_par` 114.2-114.4. What is left is
+/// the plan (about a quarter) and reading the triangles in leaf order.
+///
+/// ```
+/// use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh8, Collapser}, scene, traverse::Moller};
+/// let tris = scene::icosphere(3).to_soup();
+/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+/// let mut collapser = Collapser::new();
+/// let mut wide = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// // Next frame: the same tree shape as `from_bvh2`, in the same memory.
+/// collapser.collapse_into(&b2, &tris[..], &mut wide).unwrap();
+/// let fresh = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+/// assert_eq!((wide.nodes().len(), wide.packs().len()), (fresh.nodes().len(), fresh.packs().len()));
+/// let ray = strahl::Ray::new(strahl::Vec3::splat(-2.0), strahl::Vec3::ONE);
+/// assert_eq!(wide.intersect::<Moller>(&ray), fresh.intersect::<Moller>(&ray));
+/// ```
+#[derive(Clone, Debug, Default)]
+pub struct Collapser {
+    counts: Vec<u32>,
+    plan: Plan,
+}
+
+impl Collapser {
+    /// A collapser without memory yet (it grows on the first collapse and is kept).
+    ///
+    /// ```
+    /// let mut c = strahl::layout::Collapser::new();
+    /// # let _ = &mut c;
+    /// ```
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// [`BvhWide::from_bvh2`] into `out` (its old contents replaced): the same tree, with this
+    /// collapser's tables and `out`'s arrays reused where large enough. On an error `out` is left
+    /// empty (its memory kept).
+    ///
+    /// ```
+    /// use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh4, Collapser}, scene};
+    /// let tris = scene::thin_soup(5_000, 1);
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::fast()).unwrap();
+    /// let mut wide = Bvh4::from_bvh2(&b2, &tris[..]).unwrap();
+    /// let mut broken = b2.clone();
+    /// broken.prim_indices[0] = u32::MAX; // no such triangle
+    /// let mut c = Collapser::new();
+    /// assert!(c.collapse_into(&broken, &tris[..], &mut wide).is_err());
+    /// assert!(wide.nodes().is_empty()); // left empty
+    /// c.collapse_into(&b2, &tris[..], &mut wide).unwrap();
+    /// assert_eq!(wide.nodes().len(), Bvh4::from_bvh2(&b2, &tris[..]).unwrap().nodes().len());
+    /// ```
+    pub fn collapse_into<L: Lane, const N: usize, P: Triangles + ?Sized>(
+        &mut self,
+        bvh: &Bvh2,
+        tris: &P,
+        out: &mut BvhWide<L, N>,
+    ) -> Result<(), CollapseError> {
+        let () = BvhWide::<L, N>::LANES_MATCH;
+        let made = subtree_counts_into(bvh, &mut self.counts).and_then(|()| self.plan.fill(bvh, &self.counts, N));
+        if let Err(e) = made {
+            out.clear();
+            return Err(e);
+        }
+        BvhWide::collapse_with(bvh, tris, &self.counts, &self.plan, out)
+    }
+
+    /// [`BvhWide::from_bvh2_par`] into `out`, reusing memory as
+    /// [`collapse_into`](Self::collapse_into) does (`std`).
+    ///
+    /// ```
+    /// use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh8, Collapser}, scene};
+    /// let tris = scene::thin_soup(20_000, 2);
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::fast()).unwrap();
+    /// let mut c = Collapser::new();
+    /// let mut wide = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+    /// c.collapse_into_par(&b2, &tris[..], &mut wide, 2).unwrap();
+    /// let par = Bvh8::from_bvh2_par(&b2, &tris[..], 2).unwrap();
+    /// assert_eq!(wide.nodes().len(), par.nodes().len());
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn collapse_into_par<L: Lane + Send + Sync, const N: usize, P: Triangles + Sync + ?Sized>(
+        &mut self,
+        bvh: &Bvh2,
+        tris: &P,
+        out: &mut BvhWide<L, N>,
+        threads: usize,
+    ) -> Result<(), CollapseError> {
+        BvhWide::collapse_par_into(bvh, tris, threads, self, out)
+    }
+}
+
 /// A wide node still to fill: binary node, wide node slot, depth.
 type Job = (u32, usize, u32);
 
@@ -68,6 +164,22 @@ struct Builder<'a, L, const N: usize, P: ?Sized> {
     #[cfg(feature = "std")]
     sunk: usize,
     depth: u32,
+}
+
+/// Empties `v` and makes room for `n` elements: in its own memory where that is large enough
+/// (a collapse into arrays kept from the last one: no new pages), else in a new allocation,
+/// advised for huge pages where large (`std`; see `layout::pages`).
+fn reserve_advised<T>(v: &mut Vec<T>, n: usize) {
+    v.clear();
+    if v.capacity() >= n {
+        return;
+    }
+    #[cfg(feature = "std")]
+    {
+        *v = super::pages::advised_with_capacity(n);
+    }
+    #[cfg(not(feature = "std"))]
+    v.reserve_exact(n);
 }
 
 /// `true` if some triangle is referenced twice by `bvh`'s leaves (spatial splits). Exact:
@@ -337,16 +449,8 @@ impl<'a, L: Lane, const N: usize, P: Triangles + ?Sized> Builder<'a, L, N, P> {
         if packs >= 1 << 27 {
             return;
         }
-        #[cfg(feature = "std")]
-        {
-            self.nodes = super::pages::advised_with_capacity(nodes);
-            self.packs = super::pages::advised_with_capacity(packs);
-        }
-        #[cfg(not(feature = "std"))]
-        {
-            self.nodes = Vec::with_capacity(nodes);
-            self.packs = Vec::with_capacity(packs);
-        }
+        reserve_advised(&mut self.nodes, nodes);
+        reserve_advised(&mut self.packs, packs);
     }
 
     /// [`Triangles::prefetch`] for the triangles below binary node `b` if it becomes one leaf
@@ -477,7 +581,7 @@ const PLAN_LEAF_PACKS: usize = 2;
 /// `dist(n, i) = min(dist(n, i - 1), best(n, i))`, with
 /// `best(n, i) = min_k dist(left, k) + dist(right, i - k)` and
 /// `leaf(n) = A(n) PACK_COST ceil(P(n) / N)`.
-#[derive(Default)]
+#[derive(Clone, Debug, Default)]
 struct Plan {
     dist: Vec<[f32; 8]>,
     /// `dist(n, 1)` is a leaf.
@@ -486,28 +590,28 @@ struct Plan {
 
 impl Plan {
     fn new(bvh: &Bvh2, counts: &[u32], n_wide: usize) -> Result<Self, CollapseError> {
+        let mut plan = Plan::default();
+        plan.fill(bvh, counts, n_wide)?;
+        Ok(plan)
+    }
+
+    /// [`Plan::new`] into this plan's tables (kept between calls: no allocation, no page faults
+    /// where they are large enough already).
+    fn fill(&mut self, bvh: &Bvh2, counts: &[u32], n_wide: usize) -> Result<(), CollapseError> {
         let n = bvh.nodes.len();
         // PERF: 32 bytes a node (64 MB for the 1M soup's tree), written once: on huge pages where
         // the kernel allows (`hugepages`), first-touch page faults took about 25 ms of the plan.
-        #[cfg(feature = "std")]
-        let dist = {
-            let mut d = super::pages::advised_with_capacity(n);
-            d.resize(n, [0.0; 8]);
-            d
-        };
-        #[cfg(not(feature = "std"))]
-        let dist = vec![[0.0; 8]; n];
-        let mut plan = Plan {
-            dist,
-            leaf: vec![false; n],
-        };
+        reserve_advised(&mut self.dist, n);
+        self.dist.resize(n, [0.0; 8]);
+        self.leaf.clear();
+        self.leaf.resize(n, false);
         if n == 0 {
-            return Ok(plan);
+            return Ok(());
         }
-        if !plan.fill_in_index_order(bvh, counts, n_wide) {
-            plan.fill_with_stack(bvh, counts, n_wide)?;
+        if !self.fill_in_index_order(bvh, counts, n_wide) {
+            self.fill_with_stack(bvh, counts, n_wide)?;
         }
-        Ok(plan)
+        Ok(())
     }
 
     /// [`Plan::new`]'s table by a post-order walk from the root with a stack (any node order;
@@ -681,17 +785,21 @@ fn best_all(dl: &[f32; 8], dr: &[f32; 8]) -> [f32; 8] {
 
 /// Primitives below every binary node (iterative post-order; malformed trees are errors).
 fn subtree_counts(bvh: &Bvh2) -> Result<Vec<u32>, CollapseError> {
+    let mut counts = Vec::new();
+    subtree_counts_into(bvh, &mut counts)?;
+    Ok(counts)
+}
+
+/// [`subtree_counts`] into `counts` (kept between calls).
+fn subtree_counts_into(bvh: &Bvh2, counts: &mut Vec<u32>) -> Result<(), CollapseError> {
     let n = bvh.nodes.len();
-    let mut counts = vec![0u32; n];
-    if n == 0 {
-        return Ok(counts);
-    }
-    if counts_in_index_order(bvh, &mut counts) {
-        return Ok(counts);
+    counts.clear();
+    counts.resize(n, 0);
+    if n == 0 || counts_in_index_order(bvh, counts) {
+        return Ok(());
     }
     counts.fill(0);
-    counts_with_stack(bvh, &mut counts)?;
-    Ok(counts)
+    counts_with_stack(bvh, counts)
 }
 
 /// [`subtree_counts`] by a post-order walk from the root with a stack (any node order; malformed
@@ -784,33 +892,62 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
 
     fn collapse<P: Triangles + ?Sized, const GREEDY: bool>(bvh: &Bvh2, tris: &P) -> Result<Self, CollapseError> {
         let () = Self::LANES_MATCH;
-        Self::collapse_counted::<P, GREEDY>(bvh, tris, &subtree_counts(bvh)?)
-    }
-
-    /// [`collapse`](Self::collapse) with the subtree counts already made.
-    fn collapse_counted<P: Triangles + ?Sized, const GREEDY: bool>(
-        bvh: &Bvh2,
-        tris: &P,
-        counts: &[u32],
-    ) -> Result<Self, CollapseError> {
+        let counts = subtree_counts(bvh)?;
         let plan = if GREEDY {
             Plan::default()
         } else {
-            Plan::new(bvh, counts, N)?
+            Plan::new(bvh, &counts, N)?
         };
-        let mut b = Builder::<L, N, P>::new(bvh, tris, counts, &plan, has_repeats(bvh, tris));
-        if !bvh.nodes.is_empty() {
+        let mut out = Self::empty();
+        Self::collapse_with(bvh, tris, &counts, &plan, &mut out)?;
+        Ok(out)
+    }
+
+    /// An empty tree (no nodes, no memory).
+    fn empty() -> Self {
+        Self {
+            nodes: Vec::new(),
+            packs: Vec::new(),
+            depth: 0,
+        }
+    }
+
+    /// Empties the tree, keeping its arrays' memory.
+    fn clear(&mut self) {
+        self.nodes.clear();
+        self.packs.clear();
+        self.depth = 0;
+    }
+
+    /// The collapse of `bvh` with the subtree counts and plan already made (an empty plan: the
+    /// greedy collapse) into `out`, whose arrays are reused where large enough. On an error
+    /// `out` is left empty.
+    fn collapse_with<P: Triangles + ?Sized>(
+        bvh: &Bvh2,
+        tris: &P,
+        counts: &[u32],
+        plan: &Plan,
+        out: &mut Self,
+    ) -> Result<(), CollapseError> {
+        let mut b = Builder::<L, N, P>::new(bvh, tris, counts, plan, has_repeats(bvh, tris));
+        b.nodes = core::mem::take(&mut out.nodes);
+        b.packs = core::mem::take(&mut out.packs);
+        b.nodes.clear();
+        b.packs.clear();
+        let done = if bvh.nodes.is_empty() {
+            Ok(())
+        } else {
             // PERF: large trees on transparent huge pages (feature `hugepages`, Linux; see
             // `layout::pages`): fewer TLB misses in traversal, results unchanged. The arrays are
-            // made at their final size in advised memory.
+            // made at their final size in advised memory (or were, the last time).
             b.presize(0);
-            b.run(0)?;
+            b.run(0)
+        };
+        (out.nodes, out.packs, out.depth) = (b.nodes, b.packs, b.depth);
+        if done.is_err() {
+            out.clear();
         }
-        Ok(Self {
-            nodes: b.nodes,
-            packs: b.packs,
-            depth: b.depth,
-        })
+        done
     }
 
     /// [`from_bvh2`](Self::from_bvh2) on up to `threads` threads (`std`; at least 1, at most
@@ -841,31 +978,56 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     where
         L: Send + Sync,
     {
+        let mut out = Self::empty();
+        Self::collapse_par_into(bvh, tris, threads, &mut Collapser::new(), &mut out)?;
+        Ok(out)
+    }
+
+    /// [`from_bvh2_par`](Self::from_bvh2_par) with `scratch`'s tables and into `out`, both
+    /// reused where large enough ([`Collapser::collapse_into_par`]). On an error `out` is left
+    /// empty.
+    #[cfg(feature = "std")]
+    fn collapse_par_into<P: Triangles + Sync + ?Sized>(
+        bvh: &Bvh2,
+        tris: &P,
+        threads: usize,
+        scratch: &mut Collapser,
+        out: &mut Self,
+    ) -> Result<(), CollapseError>
+    where
+        L: Send + Sync,
+    {
         use core::sync::atomic::{AtomicUsize, Ordering};
         use std::sync::Mutex;
         let () = Self::LANES_MATCH;
         let threads = threads.clamp(1, crate::build::MAX_THREADS);
-        let counts = subtree_counts(bvh)?;
+        let made =
+            subtree_counts_into(bvh, &mut scratch.counts).and_then(|()| scratch.plan.fill(bvh, &scratch.counts, N));
+        if let Err(e) = made {
+            out.clear();
+            return Err(e);
+        }
+        let (counts, plan) = (&scratch.counts[..], &scratch.plan);
         let total = counts.first().copied().unwrap_or(0) as usize;
         if threads == 1 || total <= 2 * PAR_GRAIN {
-            return Self::collapse_counted::<P, false>(bvh, tris, &counts);
+            return Self::collapse_with(bvh, tris, counts, plan, out);
         }
-        let plan = Plan::new(bvh, &counts, N)?;
         // PERF: the repeat scan (a pass over every primitive index) once, not once per worker's
         // builder: each subtree's builder made it again, twice per job, and the collapse of the
         // 1M soup's tree took as long on 2 threads as on 1.
         let repeats = has_repeats(bvh, tris);
-        let builder = || Builder::<L, N, P>::new(bvh, tris, &counts, &plan, repeats);
+        let builder = || Builder::<L, N, P>::new(bvh, tris, counts, plan, repeats);
         // The top on this thread, down to subtrees of at most `grain` triangles.
         let grain = (total / threads.saturating_mul(8)).max(PAR_GRAIN);
         let mut top = builder();
         let mut jobs = Vec::new();
         // NOTE: on any error the sequential collapse runs instead, so that the error is the one
         // it reports (the parallel order of work could meet another error first).
-        let sequential = || Self::collapse_counted::<P, false>(bvh, tris, &counts);
-        let Ok(at) = top.new_node(1) else { return sequential() };
+        let Ok(at) = top.new_node(1) else {
+            return Self::collapse_with(bvh, tris, counts, plan, out);
+        };
         if top.run_from(0, at, 1, Some((&mut jobs, grain))).is_err() {
-            return sequential();
+            return Self::collapse_with(bvh, tris, counts, plan, out);
         }
         // Each subtree's wide nodes and packs, counted side by side (`sizes`: exact), so that
         // the packs can go straight to their place in one array made once (no copy after).
@@ -889,16 +1051,17 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         let mut job_sizes = Vec::with_capacity(jobs.len());
         for s in sizes {
             let Some(s) = s.into_inner().ok().flatten() else {
-                return sequential();
+                return Self::collapse_with(bvh, tris, counts, plan, out);
             };
             job_sizes.push(s);
         }
         let top_packs = top.packs.len();
         let packs_total = top_packs + job_sizes.iter().map(|s| s.1).sum::<usize>();
         if packs_total >= 1 << 27 {
-            return sequential();
+            return Self::collapse_with(bvh, tris, counts, plan, out);
         }
-        let mut packs = super::pages::advised_with_capacity(packs_total);
+        let mut packs = core::mem::take(&mut out.packs);
+        reserve_advised(&mut packs, packs_total);
         packs.extend_from_slice(&top.packs);
         // The subtrees side by side, largest first: wide nodes into arrays of their own, packs
         // into their parts of `packs`, in job order after the top's.
@@ -934,10 +1097,10 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         for (p, &(_, want)) in parts.into_iter().zip(&job_sizes) {
             match p.into_inner().ok().flatten() {
                 Some(Ok(p)) if p.1 == want => done.push(p),
-                _ => return sequential(),
+                _ => return Self::collapse_with(bvh, tris, counts, plan, out),
             }
         }
-        // SAFETY: `packs` has capacity `packs_total` (made above, never pushed to since) and its
+        // SAFETY: `packs` has capacity `packs_total` (reserved above, never pushed to since) and its
         // first `top_packs` elements are initialised; the rest of the capacity was cut into one
         // disjoint part per job, of `job_sizes[j].1` elements, and job `j` wrote its part's first
         // `p.1` elements, checked above to be all of them (`MaybeUninit::write` at `sunk`, one
@@ -945,7 +1108,13 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         unsafe { packs.set_len(packs_total) };
         // In job order: node i >= 1 of a part goes to `base + i - 1`, node 0 to the job's slot;
         // its packs follow the packs before it.
-        let (mut nodes, mut depth) = (top.nodes, top.depth);
+        let mut nodes = core::mem::take(&mut out.nodes);
+        reserve_advised(
+            &mut nodes,
+            top.nodes.len() + done.iter().map(|d| d.0.len().saturating_sub(1)).sum::<usize>(),
+        );
+        nodes.extend_from_slice(&top.nodes);
+        let mut depth = top.depth;
         let mut pbase = top_packs as u32;
         for (&(_, at, _), (pn, pc, pd)) in jobs.iter().zip(done) {
             let base = nodes.len() as u32;
@@ -966,11 +1135,8 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
             pbase += pc as u32;
             depth = depth.max(pd);
         }
-        Ok(Self {
-            nodes: super::pages::to_huge_pages(nodes),
-            packs,
-            depth,
-        })
+        (out.nodes, out.packs, out.depth) = (nodes, packs, depth);
+        Ok(())
     }
 
     const LANES_MATCH: () = assert!(L::N == N && N <= 8);

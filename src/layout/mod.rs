@@ -57,7 +57,7 @@ use crate::math::{Lane, f32x4, f32x8};
 use alloc::vec::Vec;
 
 #[cfg(feature = "alloc")]
-pub use collapse::CollapseError;
+pub use collapse::{CollapseError, Collapser};
 #[cfg(feature = "alloc")]
 pub use instance::{Instance, InstanceHit, Tlas};
 

@@ -5,7 +5,7 @@
 //! trees with `madvise(MADV_HUGEPAGE)` (we saw 68 MB of `AnonHugePages` in its process on the
 //! 1M sphereflake); the wide BVHs get the same: [`advised_with_capacity`] gives an empty vector
 //! whose range is advised before it is first touched (the collapse sizes its arrays exactly
-//! first), and [`to_huge_pages`] a copy into such memory, so the kernel backs their 2 MiB-aligned
+//! first, or reuses arrays made so before), so the kernel backs their 2 MiB-aligned
 //! parts with huge pages where `/sys/kernel/mm/transparent_hugepage/enabled` is `madvise` or
 //! `always`. A hint only: where the kernel says no, or THP is `never`, the memory is an ordinary
 //! allocation; results never change. Without the feature, or off Linux, nothing is advised.
@@ -14,19 +14,6 @@ use alloc::vec::Vec;
 
 /// Arrays smaller than this stay where they are (no whole huge page fits in them).
 pub(crate) const MIN_BYTES: usize = 4 << 20;
-
-/// `v`, moved into memory advised for transparent huge pages if it is at least [`MIN_BYTES`]
-/// long (see the [module docs](self)). Same elements, same order.
-pub(crate) fn to_huge_pages<T: Copy>(v: Vec<T>) -> Vec<T> {
-    let bytes = core::mem::size_of_val(v.as_slice());
-    if bytes < MIN_BYTES || !cfg!(all(feature = "hugepages", target_os = "linux")) {
-        return v;
-    }
-    let mut out = Vec::<T>::with_capacity(v.len());
-    advise(out.as_mut_ptr().cast(), bytes);
-    out.extend_from_slice(&v);
-    out
-}
 
 /// An empty vector with room for `n` elements, advised for transparent huge pages if that is
 /// at least [`MIN_BYTES`] (see the [module docs](self)), to be filled without reallocating.
@@ -64,18 +51,6 @@ fn advise(_: *mut u8, _: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn small_vectors_stay_and_large_ones_keep_their_elements() {
-        let small: Vec<u32> = (0..1000).collect();
-        let p = small.as_ptr();
-        let small = to_huge_pages(small);
-        assert_eq!(small.as_ptr(), p, "a small vector is not copied");
-        let n = MIN_BYTES / 4 * 3 + 17;
-        let big: Vec<u32> = (0..n as u32).map(|i| i.wrapping_mul(2_654_435_761)).collect();
-        let copy = to_huge_pages(big.clone());
-        assert_eq!(copy, big);
-    }
 
     /// The advised range is accepted on Linux (where THP may still be off: `madvise` then fails
     /// with EINVAL, which the hint tolerates), and the memory stays usable.
