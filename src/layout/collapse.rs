@@ -1161,7 +1161,7 @@ mod tests {
         let specials = [f32::INFINITY, f32::NAN, 0.0, 1e30, 3.5];
         for t in 0..2000 {
             let mut v = |k: usize| {
-                if t % 7 == 0 && k % 3 == 0 {
+                if t % 7 == 0 && k.is_multiple_of(3) {
                     specials[(k + t) % specials.len()]
                 } else {
                     r.range(0.0, 10.0)
