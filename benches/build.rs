@@ -1099,6 +1099,7 @@ fn build_threads(c: &mut Criterion) {
     g.measurement_time(Duration::from_secs(4));
     let presets = [
         ("fastest", BuildParams::fastest()),
+        ("ploc", BuildParams::ploc()),
         ("fast", BuildParams::fast()),
         ("balanced", BuildParams::balanced()),
         ("high", BuildParams::high()),

@@ -218,6 +218,8 @@ fn large_scenes_split_wide() {
         // The bottom-up LBVH: its buckets built side by side, then joined (190,000 references:
         // 2 threads and more take the parallel path).
         ("fastest", BuildParams::fastest()),
+        // PLOC: its Morton sort in chunks side by side.
+        ("ploc", BuildParams::ploc()),
         (
             "fastest_leaves_3",
             BuildParams {

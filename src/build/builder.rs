@@ -183,7 +183,9 @@ impl Builder {
     /// then the remaining subtrees side by side), the LBVH ([`Strategy::Lbvh`] with 30-bit codes:
     /// the Morton codes and the top-digit scatter in chunks side by side, then each top-digit
     /// bucket's subtree, which the joins across buckets put together on the calling thread; the
-    /// same nodes in the same order as the single-threaded build) and the HLBVH ([`Strategy::Hlbvh`],
+    /// same nodes in the same order as the single-threaded build), PLOC's Morton sort
+    /// ([`Strategy::Ploc`], 30-bit codes; its agglomeration stays on the calling thread) and the
+    /// HLBVH ([`Strategy::Hlbvh`],
     /// [`Strategy::HlbvhSah`]: with 30-bit codes, the Morton codes, the top-digit scatter and the
     /// bucket sorts in chunks side by side; the SAH mini-trees side by side), and the first
     /// round of rotations ([`Refine::Rotations`]: subtrees side by side, then the nodes above
@@ -237,7 +239,7 @@ impl Builder {
                 Strategy::SweepSah => sweep::build(self, info, params, out),
                 Strategy::Lbvh => lbvh::build(self, info, params, out, threads),
                 Strategy::Hlbvh | Strategy::HlbvhSah => hlbvh::build(self, info, params, out, threads),
-                Strategy::Ploc => ploc::build(self, info, params, out),
+                Strategy::Ploc => ploc::build(self, info, params, out, threads),
             }
         };
         debug_assert_eq!(out.prim_indices.len(), n);

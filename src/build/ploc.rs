@@ -22,7 +22,7 @@
 //! used); the nodes are laid out bottom-up, children before their parent, the root at index 0.
 
 use super::builder::{Builder, Counters};
-use super::lbvh::{codes_of, gather, sort_gather30};
+use super::lbvh::{codes_of, gather, sort_gather30_par};
 use super::prims::{Box8, PrepInfo, PrimRef};
 use super::radix::sort_items;
 use super::{BuildParams, Bvh2, MortonBits, Node};
@@ -32,13 +32,16 @@ use crate::geometry::morton::{morton63_scalar, morton63_x8};
 type Link = [u32; 2];
 
 /// Builds the PLOC tree over `b.refs` into `out`.
-pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2) -> Counters {
+/// `threads > 1` (`std`): the Morton codes, scatter and bucket sorts of 30-bit codes in chunks
+/// side by side ([`sort_gather30_par`]: the same order); the agglomeration stays on the calling
+/// thread.
+pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2, threads: usize) -> Counters {
     let cb = info.cbounds.to_aabb();
     // The references in Morton order: in `refs` (30-bit codes) or in `alt` (63-bit).
     let sorted_in_alt = match p.morton_bits {
         MortonBits::Bits30 => {
             let q = p.quantizer(&cb);
-            sort_gather30(
+            sort_gather30_par(
                 &mut b.refs,
                 &mut b.alt,
                 &mut b.items32,
@@ -46,6 +49,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 &mut b.packed_tmp,
                 &q,
                 out,
+                threads,
             );
             false
         }
