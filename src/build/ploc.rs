@@ -277,7 +277,7 @@ mod tests {
                 max_depth,
                 ..BuildParams::ploc()
             };
-            let c = build(&mut b, &info, &p, &mut out);
+            let c = build(&mut b, &info, &p, &mut out, 1);
             let v = out.validate(&boxes[..]).unwrap();
             assert_eq!(v.max_depth, c.max_depth);
             c
