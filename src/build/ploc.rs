@@ -101,7 +101,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
         // NOTE: the LBVH sorts the references again (`refs` holds them, in some order).
         out.nodes.clear();
         out.prim_indices.clear();
-        let mut c = super::lbvh::build(b, info, p, out, 1);
+        let mut c = super::lbvh::build(b, info, p, out, threads);
         c.forced_splits += 1;
         return c;
     }

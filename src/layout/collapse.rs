@@ -1063,6 +1063,8 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         if packs_total >= 1 << 27 {
             return Self::collapse_with(bvh, tris, counts, plan, out);
         }
+        // `out` holds no half of the old tree from here on (a panic in a worker leaves it empty).
+        out.clear();
         let mut packs = core::mem::take(&mut out.packs);
         reserve_advised(&mut packs, packs_total);
         packs.extend_from_slice(&top.packs);
@@ -1100,10 +1102,15 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         for (p, &(_, want)) in parts.into_iter().zip(&job_sizes) {
             match p.into_inner().ok().flatten() {
                 Some(Ok(p)) if p.1 == want => done.push(p),
-                _ => return Self::collapse_with(bvh, tris, counts, plan, out),
+                _ => {
+                    // The array goes back for the sequential collapse to reuse.
+                    packs.clear();
+                    out.packs = packs;
+                    return Self::collapse_with(bvh, tris, counts, plan, out);
+                }
             }
         }
-        // SAFETY: `packs` has capacity `packs_total` (reserved above, never pushed to since) and its
+        // SAFETY: `packs` has capacity at least `packs_total` (reserved above, never pushed to since) and its
         // first `top_packs` elements are initialised; the rest of the capacity was cut into one
         // disjoint part per job, of `job_sizes[j].1` elements, and job `j` wrote its part's first
         // `p.1` elements, checked above to be all of them (`MaybeUninit::write` at `sunk`, one
