@@ -108,7 +108,7 @@ impl Collapser {
         out: &mut BvhWide<L, N>,
     ) -> Result<(), CollapseError> {
         let () = BvhWide::<L, N>::LANES_MATCH;
-        let made = subtree_counts_into(bvh, &mut self.counts).and_then(|()| self.plan.fill(bvh, &self.counts, N));
+        let made = counts_and_plan(bvh, &mut self.counts, &mut self.plan, N, false, 1);
         if let Err(e) = made {
             out.clear();
             return Err(e);
@@ -589,6 +589,8 @@ struct Plan {
 }
 
 impl Plan {
+    /// The reference the fused passes ([`counts_and_plan`]) are tested against.
+    #[cfg(test)]
     fn new(bvh: &Bvh2, counts: &[u32], n_wide: usize) -> Result<Self, CollapseError> {
         let mut plan = Plan::default();
         plan.fill(bvh, counts, n_wide)?;
@@ -597,6 +599,7 @@ impl Plan {
 
     /// [`Plan::new`] into this plan's tables (kept between calls: no allocation, no page faults
     /// where they are large enough already).
+    #[cfg(test)]
     fn fill(&mut self, bvh: &Bvh2, counts: &[u32], n_wide: usize) -> Result<(), CollapseError> {
         let n = bvh.nodes.len();
         // PERF: 32 bytes a node (64 MB for the 1M soup's tree), written once: on huge pages where
@@ -660,6 +663,7 @@ impl Plan {
     /// every interior node's children come after it (as in the trees of the top-down builders,
     /// sequential and parallel): `false` (and a table to be made again) where one does not.
     /// PERF: the walk with a stack took about 40 ns a node on the 1M soup's tree.
+    #[cfg(test)]
     fn fill_in_index_order(&mut self, bvh: &Bvh2, counts: &[u32], n_wide: usize) -> bool {
         let n = bvh
             .nodes
@@ -737,6 +741,272 @@ impl Plan {
     }
 }
 
+/// The subtree counts and the cost-optimal collapse's table together ([`subtree_counts_into`] and
+/// [`Plan::fill`], the same numbers): in one pass from the last node to the first where the tree
+/// allows ([`fused_range`]), with the nodes cut into ranges done side by side on `threads` threads
+/// (`std`, [`fused_par`]); else the two walks with a stack, which report malformed trees. `plan`
+/// left empty where `greedy`.
+fn counts_and_plan(
+    bvh: &Bvh2,
+    counts: &mut Vec<u32>,
+    plan: &mut Plan,
+    n_wide: usize,
+    greedy: bool,
+    threads: usize,
+) -> Result<(), CollapseError> {
+    if greedy {
+        plan.dist.clear();
+        plan.leaf.clear();
+        return subtree_counts_into(bvh, counts);
+    }
+    let n = bvh.nodes.len();
+    counts.clear();
+    counts.resize(n, 0);
+    // PERF: 32 bytes a node (64 MB for the 1M soup's tree), written once: on huge pages where
+    // the kernel allows (`hugepages`), first-touch page faults took about 25 ms of the plan.
+    reserve_advised(&mut plan.dist, n);
+    plan.dist.resize(n, [0.0; 8]);
+    plan.leaf.clear();
+    plan.leaf.resize(n, false);
+    if n == 0 {
+        return Ok(());
+    }
+    #[cfg(feature = "std")]
+    if threads > 1 && n >= PAR_PLAN_NODES && fused_par(&bvh.nodes, counts, plan, n_wide, threads) {
+        return Ok(());
+    }
+    let _ = threads;
+    if fused_range(&bvh.nodes, 0, counts, &mut plan.dist, &mut plan.leaf, n_wide, None) {
+        return Ok(());
+    }
+    counts.fill(0);
+    counts_with_stack(bvh, counts)?;
+    plan.fill_with_stack(bvh, counts, n_wide)
+}
+
+/// Trees of fewer nodes make their plan on one thread.
+#[cfg(feature = "std")]
+const PAR_PLAN_NODES: usize = 1 << 16;
+
+/// The count and plan entry of a node with `prims` primitives below it, from its children's plan
+/// entries (`None`: a leaf): what [`Plan::fill`]'s passes compute for it.
+#[inline(always)]
+fn plan_entry(
+    node: &crate::traverse::Node,
+    prims: usize,
+    kids: Option<(&[f32; 8], &[f32; 8])>,
+    n_wide: usize,
+) -> ([f32; 8], bool) {
+    let area = half_area(&node.aabb()).max(0.0);
+    let packs = prims.div_ceil(n_wide) as f32;
+    let Some((dl, dr)) = kids else {
+        return ([area * PACK_COST * packs; 8], true);
+    };
+    let all = best_all(dl, dr);
+    let internal = area * NODE_COST + all[(n_wide - 1) & 7];
+    let leaf = if prims <= PLAN_LEAF_PACKS * n_wide {
+        area * PACK_COST * packs
+    } else {
+        f32::INFINITY
+    };
+    let mut d = [0.0f32; 8];
+    d[0] = leaf.min(internal);
+    for k in 2..=n_wide.min(8) {
+        d[k - 1] = d[k - 2].min(all[k - 1]);
+    }
+    (d, leaf <= internal)
+}
+
+/// Counts and plan entries of the nodes `base .. base + counts.len()` (the slices hold theirs) in
+/// one pass from the last to the first, where every interior node among them has its two
+/// children among them, after it, and no node is the child of two: `false` where that does not
+/// hold (then the slices hold garbage).
+// PERF: the counts' pass and the plan's took 12.4 and 38 ms on the 1M soup's tree (2M nodes);
+// one pass reads the nodes once.
+fn fused_range(
+    nodes: &[crate::traverse::Node],
+    base: usize,
+    counts: &mut [u32],
+    dist: &mut [[f32; 8]],
+    leaf: &mut [bool],
+    n_wide: usize,
+    roots: Option<[usize; 2]>,
+) -> bool {
+    let len = counts.len().min(dist.len()).min(leaf.len());
+    let end = base + len;
+    if end > nodes.len() {
+        return false;
+    }
+    let mut seen = alloc::vec![0u64; len.div_ceil(64)];
+    let mut claim = |c: usize| {
+        let c = c - base;
+        let (w, b) = (c / 64, 1u64 << (c % 64));
+        let fresh = seen[w] & b == 0;
+        seen[w] |= b;
+        fresh
+    };
+    for i in (base..end).rev() {
+        let node = &nodes[i];
+        let k = i - base;
+        if node.is_leaf() {
+            counts[k] = node.count;
+            (dist[k], leaf[k]) = plan_entry(node, node.count as usize, None, n_wide);
+            continue;
+        }
+        let (l, r) = (node.left() as usize, node.right() as usize);
+        if l <= i || r <= i || l >= end || r >= end || l == r || !claim(l) || !claim(r) {
+            return false;
+        }
+        counts[k] = counts[l - base].saturating_add(counts[r - base]);
+        let kids = (&dist[l - base], &dist[r - base]);
+        (dist[k], leaf[k]) = plan_entry(node, counts[k] as usize, Some(kids), n_wide);
+    }
+    // The subtree roots, whose parent is outside: nobody inside claimed them.
+    roots.is_none_or(|r| r.iter().all(|&x| x >= base && x < end && claim(x)))
+}
+
+/// [`fused_range`] on `threads` threads: the subtrees of the interior nodes some levels below the
+/// root (about 8 per thread), whose nodes the top-down builders lay out as one run each (every
+/// node's children after it, a subtree's nodes after its root's pair), each done as a range side
+/// by side; then the nodes outside the ranges, from the last to the first. The checks are
+/// [`fused_range`]'s over the whole array (children after their parent, no node the child of
+/// two; a node outside a range may have children inside one only as the subtree root it is), so
+/// this succeeds only where the one-thread pass would, with the same numbers. `false` where the
+/// tree does not fall into such ranges (then the arrays hold garbage and the caller makes them
+/// again).
+#[cfg(feature = "std")]
+fn fused_par(
+    nodes: &[crate::traverse::Node],
+    counts: &mut [u32],
+    plan: &mut Plan,
+    n_wide: usize,
+    threads: usize,
+) -> bool {
+    let n = nodes.len();
+    if counts.len() != n || plan.dist.len() != n || plan.leaf.len() != n {
+        return false;
+    }
+    // NOTE: deep enough that the parallel builders' trees fall into ranges too: their nodes above
+    // the tasks of the last round (about `8 threads` of them) are not laid out subtree by subtree.
+    let want = threads.saturating_mul(64);
+    // The subtree roots: interior nodes of the first level with enough of them.
+    let mut level = alloc::vec![0usize];
+    for _ in 0..24 {
+        if level.len() >= want {
+            break;
+        }
+        let mut next = Vec::with_capacity(2 * level.len());
+        for &c in &level {
+            let Some(node) = nodes.get(c) else { return false };
+            if !node.is_leaf() {
+                next.extend([node.left() as usize, node.right() as usize]);
+            }
+        }
+        if next.is_empty() {
+            break;
+        }
+        level = next;
+    }
+    // Each root's run: from its first child to the last node of its subtree (where the last pair
+    // made is: down the right child where it is interior, else the left). `(lo, end, root)`.
+    let mut ranges = Vec::with_capacity(level.len());
+    for &c in &level {
+        let Some(node) = nodes.get(c).filter(|nd| !nd.is_leaf()) else {
+            continue;
+        };
+        let (l, r) = (node.left() as usize, node.right() as usize);
+        let mut x = c;
+        let mut end = None;
+        for _ in 0..n.min(1 << 12) {
+            let Some(nd) = nodes.get(x) else { return false };
+            let (a, b) = (nd.left() as usize, nd.right() as usize);
+            let (Some(na), Some(nb)) = (nodes.get(a), nodes.get(b)) else {
+                return false;
+            };
+            if !nb.is_leaf() {
+                x = b;
+            } else if !na.is_leaf() {
+                x = a;
+            } else {
+                end = Some(a.max(b) + 1);
+                break;
+            }
+        }
+        let Some(end) = end else { return false };
+        let lo = l.min(r);
+        if lo <= c || l == r || l.max(r) >= end || end > n {
+            return false;
+        }
+        ranges.push((lo, end, c));
+    }
+    ranges.sort_unstable();
+    if ranges.is_empty() || ranges.windows(2).any(|w| w[0].1 > w[1].0) {
+        return false;
+    }
+    // The ranges side by side, largest first.
+    {
+        use core::sync::atomic::{AtomicBool, Ordering};
+        let spans = || ranges.iter().map(|r| (r.0, r.1));
+        let cs = crate::par::split_ranges(counts, spans());
+        let ds = crate::par::split_ranges(&mut plan.dist, spans());
+        let ls = crate::par::split_ranges(&mut plan.leaf, spans());
+        let ok: Vec<AtomicBool> = ranges.iter().map(|_| AtomicBool::new(false)).collect();
+        let mut jobs: Vec<_> = ranges.iter().zip(cs).zip(ds).zip(ls).zip(&ok).collect();
+        jobs.sort_by_key(|((((r, _), _), _), _)| core::cmp::Reverse(r.1 - r.0));
+        crate::par::each_job(jobs, threads, |((((r, c), d), l), ok)| {
+            let root = &nodes[r.2];
+            let roots = [root.left() as usize, root.right() as usize];
+            ok.store(fused_range(nodes, r.0, c, d, l, n_wide, Some(roots)), Ordering::Relaxed);
+        });
+        if !ok.iter().all(|o| o.load(Ordering::Relaxed)) {
+            return false;
+        }
+    }
+    // The nodes outside the ranges, from the last to the first.
+    let mut seen = alloc::vec![0u64; n.div_ceil(64)];
+    let mut claim = |c: usize| {
+        let (w, b) = (c / 64, 1u64 << (c % 64));
+        let fresh = seen[w] & b == 0;
+        seen[w] |= b;
+        fresh
+    };
+    let inside = |x: usize| {
+        let k = ranges.partition_point(|r| r.0 <= x);
+        k > 0 && x < ranges[k - 1].1
+    };
+    let mut hi = n;
+    for k in (0..=ranges.len()).rev() {
+        let lo = if k > 0 { ranges[k - 1].1 } else { 0 };
+        for i in (lo..hi).rev() {
+            let node = &nodes[i];
+            if node.is_leaf() {
+                counts[i] = node.count;
+                (plan.dist[i], plan.leaf[i]) = plan_entry(node, node.count as usize, None, n_wide);
+                continue;
+            }
+            let (l, r) = (node.left() as usize, node.right() as usize);
+            if l <= i || r <= i || l >= n || r >= n || l == r {
+                return false;
+            }
+            // A subtree root's children are its range's (checked unclaimed there); any other
+            // node's are outside every range.
+            let root = ranges
+                .binary_search_by_key(&(l.min(r)), |r| r.0)
+                .is_ok_and(|j| ranges[j].2 == i);
+            if !root && (inside(l) || inside(r) || !claim(l) || !claim(r)) {
+                return false;
+            }
+            counts[i] = counts[l].saturating_add(counts[r]);
+            let kids = (&plan.dist[l], &plan.dist[r]);
+            (plan.dist[i], plan.leaf[i]) = plan_entry(node, counts[i] as usize, Some(kids), n_wide);
+        }
+        if k > 0 {
+            hi = ranges[k - 1].0;
+        }
+    }
+    true
+}
+
 /// `min_k dist_l(k) + dist_r(i - k)` over `k = 1 ..= i - 1` and the first `k` that reaches it
 /// (`i >= 2`).
 #[inline]
@@ -787,6 +1057,7 @@ fn best_all(dl: &[f32; 8], dr: &[f32; 8]) -> [f32; 8] {
 }
 
 /// Primitives below every binary node (iterative post-order; malformed trees are errors).
+#[cfg(test)]
 fn subtree_counts(bvh: &Bvh2) -> Result<Vec<u32>, CollapseError> {
     let mut counts = Vec::new();
     subtree_counts_into(bvh, &mut counts)?;
@@ -895,12 +1166,8 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
 
     fn collapse<P: Triangles + ?Sized, const GREEDY: bool>(bvh: &Bvh2, tris: &P) -> Result<Self, CollapseError> {
         let () = Self::LANES_MATCH;
-        let counts = subtree_counts(bvh)?;
-        let plan = if GREEDY {
-            Plan::default()
-        } else {
-            Plan::new(bvh, &counts, N)?
-        };
+        let (mut counts, mut plan) = (Vec::new(), Plan::default());
+        counts_and_plan(bvh, &mut counts, &mut plan, N, GREEDY, 1)?;
         let mut out = Self::empty();
         Self::collapse_with(bvh, tris, &counts, &plan, &mut out)?;
         Ok(out)
@@ -956,11 +1223,14 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// [`from_bvh2`](Self::from_bvh2) on up to `threads` threads (`std`; at least 1, at most
     /// [`MAX_THREADS`](crate::build::MAX_THREADS)): the same tree, node for node and pack for
     /// pack, numbered in another order (the same bytes on every run with the same `threads`).
-    /// The cost-optimal plan is made on the calling thread; the wide nodes and packs of subtrees
-    /// of at most `n / (8 threads)` triangles (at least 4,096) side by side, each subtree's packs
-    /// written straight into its part of the output array (the parts sized by a first pass). Trees of up to 8,192
-    /// triangles are collapsed on the calling thread, and so is a tree that cannot be collapsed
-    /// (the same error as `from_bvh2`).
+    /// The subtree counts and the cost-optimal plan are made in one pass over the binary nodes,
+    /// cut into runs of whole subtrees made side by side where the tree is laid out subtree by
+    /// subtree (the top-down builders' trees, sequential and parallel; other trees on the calling
+    /// thread); the wide nodes and packs of subtrees of at most `n / (8 threads)` triangles (at
+    /// least 4,096) side by side, each subtree's packs written straight into its part of the
+    /// output array (the parts sized by a first pass). Trees of up to 8,192 triangles are
+    /// collapsed on the calling thread, and so is a tree that cannot be collapsed (the same error
+    /// as `from_bvh2`).
     ///
     /// ```
     /// use strahl::{build::{Bvh2, BuildParams}, layout::Bvh8, scene, traverse::Moller};
@@ -1004,8 +1274,7 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
         use std::sync::Mutex;
         let () = Self::LANES_MATCH;
         let threads = threads.clamp(1, crate::build::MAX_THREADS);
-        let made =
-            subtree_counts_into(bvh, &mut scratch.counts).and_then(|()| scratch.plan.fill(bvh, &scratch.counts, N));
+        let made = counts_and_plan(bvh, &mut scratch.counts, &mut scratch.plan, N, false, threads);
         if let Err(e) = made {
             out.clear();
             return Err(e);
@@ -1358,6 +1627,111 @@ mod tests {
                     }
                     let made = Plan::new(&bvh, &counts, n_wide).unwrap();
                     assert_eq!(made.leaf, walked.leaf, "{name} {n_wide}");
+                }
+            }
+        }
+    }
+
+    /// The fused counts and plan (`counts_and_plan`: one pass, or ranges side by side on several
+    /// threads) equal the separate passes bit for bit on the trees of every kind of builder
+    /// (sequential and parallel top-down builds, whose layout the ranges use, and the LBVH's,
+    /// PLOC's and HLBVH's, which take the walks), and malformed trees answer as on one thread.
+    #[test]
+    #[cfg(feature = "std")]
+    fn fused_counts_and_plan_equal_the_separate_passes() {
+        use crate::build::{BuildParams, Builder as Bvh2Builder};
+        let run = |bvh: &Bvh2, n_wide: usize, threads: usize| {
+            let (mut c, mut plan) = (Vec::new(), Plan::default());
+            counts_and_plan(bvh, &mut c, &mut plan, n_wide, false, threads).map(|()| (c, plan))
+        };
+        let bits = |p: &Plan, n_wide: usize| {
+            p.dist
+                .iter()
+                .flat_map(|d| d[..n_wide].iter().map(|x| x.to_bits()))
+                .collect::<Vec<_>>()
+        };
+        let soups = [
+            crate::scene::thin_soup(70_000, 3),
+            crate::scene::clustered_soup(70_000, 6, 2),
+        ];
+        for tris in &soups {
+            for (name, p, build_threads) in [
+                ("fast", BuildParams::fast(), 1),
+                ("fast on 3 threads", BuildParams::fast(), 3),
+                ("balanced", BuildParams::balanced(), 1),
+                ("median", BuildParams::median(), 1),
+                ("fastest", BuildParams::fastest(), 1),
+                ("ploc", BuildParams::ploc(), 1),
+                ("hybrid_sah", BuildParams::hybrid_sah(), 1),
+            ] {
+                let mut b = Bvh2Builder::new();
+                let mut bvh = Bvh2::default();
+                b.build_into_par(&tris[..], &p, &mut bvh, build_threads).unwrap();
+                assert!(
+                    bvh.nodes.len() >= PAR_PLAN_NODES,
+                    "{name}: too small to take the ranges"
+                );
+                let counts = subtree_counts(&bvh).unwrap();
+                for n_wide in [4, 8] {
+                    let reference = Plan::new(&bvh, &counts, n_wide).unwrap();
+                    for threads in [1, 2, 3, 8] {
+                        let (c, plan) = run(&bvh, n_wide, threads).unwrap();
+                        assert!(c == counts, "{name} {n_wide} {threads}");
+                        assert!(plan.leaf == reference.leaf, "{name} {n_wide} {threads}");
+                        assert!(
+                            bits(&plan, n_wide) == bits(&reference, n_wide),
+                            "{name} {n_wide} {threads}"
+                        );
+                    }
+                }
+                // The top-down builds, sequential and parallel, are cut into ranges (not a silent
+                // fallback).
+                if ["fast", "fast on 3 threads", "balanced", "median"].contains(&name) {
+                    for threads in [2, 8] {
+                        let n = bvh.nodes.len();
+                        let mut c = vec![0; n];
+                        let mut plan = Plan {
+                            dist: vec![[0.0; 8]; n],
+                            leaf: vec![false; n],
+                        };
+                        assert!(fused_par(&bvh.nodes, &mut c, &mut plan, 8, threads), "{name} {threads}");
+                        assert!(c == counts, "{name} {threads}");
+                    }
+                }
+            }
+        }
+        // Malformed trees: a child out of range, a node shared by two parents (a DAG: the walks
+        // accept it), a cycle, deep in each of the ranges' subtrees and at the top.
+        let (base, _) = Bvh2Builder::new().build(&soups[0][..], &BuildParams::fast()).unwrap();
+        let n = base.nodes.len();
+        let interiors: Vec<usize> = (0..n).filter(|&i| !base.nodes[i].is_leaf()).collect();
+        for (k, &at) in interiors
+            .iter()
+            .step_by(interiors.len() / 7)
+            .chain(&interiors[..3])
+            .enumerate()
+        {
+            let nd = base.nodes[at];
+            let b = nd.aabb();
+            for bad in [n as u32 + 5, at as u32, interiors[k % interiors.len()] as u32, 0, 1] {
+                let mut t = base.clone();
+                t.nodes[at] = crate::traverse::Node::interior(&b, bad.min(u32::MAX - 1));
+                let one = run(&t, 8, 1);
+                for threads in [2, 5] {
+                    let par = run(&t, 8, threads);
+                    match (&one, &par) {
+                        (Ok((c1, p1)), Ok((c2, p2))) => {
+                            assert!(c1 == c2, "node {at} -> {bad}");
+                            assert!(p1.leaf == p2.leaf, "node {at} -> {bad}");
+                            assert!(bits(p1, 8) == bits(p2, 8), "node {at} -> {bad}");
+                        }
+                        (Err(e1), Err(e2)) => assert_eq!(e1, e2, "node {at} -> {bad}"),
+                        _ => panic!(
+                            "node {at} -> {bad}: {:?} on one thread, {:?} on {threads}",
+                            one.is_ok(),
+                            par.is_ok()
+                        ),
+                    }
                 }
             }
         }

@@ -52,6 +52,8 @@ impl<const S: usize> Stack<S> {
     }
 
     /// Pushes an entry on top. Returns `false` when full.
+    // NOTE: used by the instance walk (`alloc`) only.
+    #[cfg_attr(not(feature = "alloc"), allow(dead_code))]
     #[inline(always)]
     pub(crate) fn push(&mut self, code: u32, dist: f32) -> bool {
         if self.len >= S {
