@@ -27,6 +27,16 @@
 //! of folded once: slower again. The permutation as a 32-byte array read and written 16 positions at
 //! a time instead of a `u128` shifted by variable amounts (2026-12-03): fewer instructions, the
 //! same time on the 256k soup (four runs each, taking turns).
+//!
+//! Also tried (2026-12-06, Intel Xeon, `small_speed`, longest axis): the winner's sides read from
+//! prefix and suffix boxes the sweeps keep, instead of folded again (25.4 against 25.0 ms: the
+//! same); and the boundaries' costs stored and their first minimum found in lanes instead of a
+//! branch per boundary (30.5 ms: eight scalar stores read back as one vector stall on
+//! store-to-load forwarding). A different algorithm for these ranges, greedy agglomerative
+//! clustering (merge the two clusters whose union has the least area, row minima kept in
+//! lanes), builds subtrees 1.7% cheaper by the SAH (0.87% of `fast()`'s whole tree on the 1M
+//! soup, 483.2 -> 479.0) but took 174 ms for that build's 94,719 ranges against about 70 ms
+//! here; not kept.
 
 use super::binned::SMALL;
 use super::builder::Counters;
