@@ -415,6 +415,10 @@ fn sah_pruned(b: &mut Builder, n: u32, p: &BuildParams, out: &mut Bvh2, threads:
     // 4. The layout: the top, then each part's subtree below its top leaf, depth first, with the
     //    depth of the deepest leaf. Stack entries: destination, source, and the depth with bit
     //    `TOP` set for a source in the top.
+    // PERF: about 14 ms on the 1M sphereflake (1.2M nodes). Each part's subtree copied as one run
+    // with its child indices moved (the mini-trees are laid out depth first, so the run is this
+    // copy's order; the same bytes, checked) took the same 14 ms (2026-12-06): the pass is bound
+    // by its 38 MB read and 38 MB written, not by the walk.
     const TOP: u32 = 1 << 31;
     let fin = &mut b.forest;
     fin.clear();
