@@ -788,6 +788,10 @@ fn counts_and_plan(
 #[cfg(feature = "std")]
 const PAR_PLAN_NODES: usize = 1 << 16;
 
+/// The plan is made on at most this many threads.
+#[cfg(feature = "std")]
+const PLAN_THREADS: usize = 16;
+
 /// The count and plan entry of a node with `prims` primitives below it, from its children's plan
 /// entries (`None`: a leaf): what [`Plan::fill`]'s passes compute for it.
 #[inline(always)]
@@ -886,6 +890,9 @@ fn fused_par(
     if counts.len() != n || plan.dist.len() != n || plan.leaf.len() != n {
         return false;
     }
+    // The pass waits on memory: more threads than this only add their start-up (256 threads on
+    // this 2-core machine: 3x slower than one).
+    let threads = threads.min(PLAN_THREADS);
     // NOTE: deep enough that the parallel builders' trees fall into ranges too: their nodes above
     // the tasks of the last round (about `8 threads` of them) are not laid out subtree by subtree.
     let want = threads.saturating_mul(64);
@@ -907,17 +914,27 @@ fn fused_par(
         }
         level = next;
     }
+    // A node twice in the level: not a tree (the one-thread pass decides).
+    level.sort_unstable();
+    if level.windows(2).any(|w| w[0] == w[1]) {
+        return false;
+    }
     // Each root's run: from its first child to the last node of its subtree (where the last pair
-    // made is: down the right child where it is interior, else the left). `(lo, end, root)`.
+    // made is: down the right child where it is interior, else the left). `(lo, end, root)`. The
+    // walks share one budget of `n` steps (disjoint subtrees of a tree take fewer in all).
     let mut ranges = Vec::with_capacity(level.len());
+    let mut steps = n;
     for &c in &level {
         let Some(node) = nodes.get(c).filter(|nd| !nd.is_leaf()) else {
             continue;
         };
         let (l, r) = (node.left() as usize, node.right() as usize);
         let mut x = c;
-        let mut end = None;
-        for _ in 0..n.min(1 << 12) {
+        let end = loop {
+            steps = match steps.checked_sub(1) {
+                Some(s) => s,
+                None => return false,
+            };
             let Some(nd) = nodes.get(x) else { return false };
             let (a, b) = (nd.left() as usize, nd.right() as usize);
             let (Some(na), Some(nb)) = (nodes.get(a), nodes.get(b)) else {
@@ -928,11 +945,9 @@ fn fused_par(
             } else if !na.is_leaf() {
                 x = a;
             } else {
-                end = Some(a.max(b) + 1);
-                break;
+                break a.max(b) + 1;
             }
-        }
-        let Some(end) = end else { return false };
+        };
         let lo = l.min(r);
         if lo <= c || l == r || l.max(r) >= end || end > n {
             return false;
@@ -1705,6 +1720,18 @@ mod tests {
         let (base, _) = Bvh2Builder::new().build(&soups[0][..], &BuildParams::fast()).unwrap();
         let n = base.nodes.len();
         let interiors: Vec<usize> = (0..n).filter(|&i| !base.nodes[i].is_leaf()).collect();
+        // The root's two children sharing one pair of children: every level below them holds
+        // each node twice (the runs would overlap; the walks accept the DAG).
+        let mut shared = base.clone();
+        let (a, b) = (shared.nodes[0].left() as usize, shared.nodes[0].right() as usize);
+        if !shared.nodes[a].is_leaf() {
+            shared.nodes[b] = crate::traverse::Node::interior(&shared.nodes[b].aabb(), shared.nodes[a].left());
+            let one = run(&shared, 8, 1).unwrap();
+            for threads in [2, 5] {
+                let par = run(&shared, 8, threads).unwrap();
+                assert!(one.0 == par.0 && one.1.leaf == par.1.leaf && bits(&one.1, 8) == bits(&par.1, 8));
+            }
+        }
         for (k, &at) in interiors
             .iter()
             .step_by(interiors.len() / 7)
