@@ -602,12 +602,7 @@ impl Plan {
     #[cfg(test)]
     fn fill(&mut self, bvh: &Bvh2, counts: &[u32], n_wide: usize) -> Result<(), CollapseError> {
         let n = bvh.nodes.len();
-        // PERF: 32 bytes a node (64 MB for the 1M soup's tree), written once: on huge pages where
-        // the kernel allows (`hugepages`), first-touch page faults took about 25 ms of the plan.
-        reserve_advised(&mut self.dist, n);
-        self.dist.resize(n, [0.0; 8]);
-        self.leaf.clear();
-        self.leaf.resize(n, false);
+        self.reset(n);
         if n == 0 {
             return Ok(());
         }
@@ -615,6 +610,16 @@ impl Plan {
             self.fill_with_stack(bvh, counts, n_wide)?;
         }
         Ok(())
+    }
+
+    /// Tables for `n` nodes, their values to be written.
+    fn reset(&mut self, n: usize) {
+        // PERF: 32 bytes a node (64 MB for the 1M soup's tree), written once: on huge pages where
+        // the kernel allows (`hugepages`), first-touch page faults took about 25 ms of the plan.
+        reserve_advised(&mut self.dist, n);
+        self.dist.resize(n, [0.0; 8]);
+        self.leaf.clear();
+        self.leaf.resize(n, false);
     }
 
     /// [`Plan::new`]'s table by a post-order walk from the root with a stack (any node order;
@@ -762,12 +767,7 @@ fn counts_and_plan(
     let n = bvh.nodes.len();
     counts.clear();
     counts.resize(n, 0);
-    // PERF: 32 bytes a node (64 MB for the 1M soup's tree), written once: on huge pages where
-    // the kernel allows (`hugepages`), first-touch page faults took about 25 ms of the plan.
-    reserve_advised(&mut plan.dist, n);
-    plan.dist.resize(n, [0.0; 8]);
-    plan.leaf.clear();
-    plan.leaf.resize(n, false);
+    plan.reset(n);
     if n == 0 {
         return Ok(());
     }
