@@ -589,7 +589,8 @@ struct Plan {
 }
 
 impl Plan {
-    /// The reference the fused passes ([`counts_and_plan`]) are tested against.
+    /// The reference the fused passes ([`counts_and_plan`]) are tested against: the walk with a
+    /// stack.
     #[cfg(test)]
     fn new(bvh: &Bvh2, counts: &[u32], n_wide: usize) -> Result<Self, CollapseError> {
         let mut plan = Plan::default();
@@ -606,10 +607,7 @@ impl Plan {
         if n == 0 {
             return Ok(());
         }
-        if !self.fill_in_index_order(bvh, counts, n_wide) {
-            self.fill_with_stack(bvh, counts, n_wide)?;
-        }
-        Ok(())
+        self.fill_with_stack(bvh, counts, n_wide)
     }
 
     /// Tables for `n` nodes, their values to be written.
@@ -664,49 +662,6 @@ impl Plan {
         Ok(())
     }
 
-    /// [`Plan::new`]'s table in one pass from the last node to the first, without a stack, where
-    /// every interior node's children come after it (as in the trees of the top-down builders,
-    /// sequential and parallel): `false` (and a table to be made again) where one does not.
-    /// PERF: the walk with a stack took about 40 ns a node on the 1M soup's tree.
-    #[cfg(test)]
-    fn fill_in_index_order(&mut self, bvh: &Bvh2, counts: &[u32], n_wide: usize) -> bool {
-        let n = bvh
-            .nodes
-            .len()
-            .min(self.dist.len())
-            .min(self.leaf.len())
-            .min(counts.len());
-        for i in (0..n).rev() {
-            let node = &bvh.nodes[i];
-            let area = half_area(&node.aabb()).max(0.0);
-            let prims = counts[i] as usize;
-            let packs = prims.div_ceil(n_wide) as f32;
-            if node.is_leaf() {
-                self.dist[i] = [area * PACK_COST * packs; 8];
-                self.leaf[i] = true;
-                continue;
-            }
-            let (l, r) = (node.left() as usize, node.right() as usize);
-            if l <= i || r <= i || l >= n || r >= n {
-                return false;
-            }
-            let all = best_all(&self.dist[l], &self.dist[r]);
-            let internal = area * NODE_COST + all[(n_wide - 1) & 7];
-            let leaf = if prims <= PLAN_LEAF_PACKS * n_wide {
-                area * PACK_COST * packs
-            } else {
-                f32::INFINITY
-            };
-            let d = &mut self.dist[i];
-            d[0] = leaf.min(internal);
-            for k in 2..=n_wide.min(8) {
-                d[k - 1] = d[k - 2].min(all[k - 1]);
-            }
-            self.leaf[i] = leaf <= internal;
-        }
-        n == bvh.nodes.len()
-    }
-
     /// `true` if binary node `k` (interior, `count` primitives) becomes one leaf.
     fn as_leaf(&self, k: u32, count: usize, n_wide: usize) -> bool {
         match self.leaf.get(k as usize) {
@@ -743,6 +698,25 @@ impl Plan {
             return Ok(());
         }
         self.open(bvh, n, s, kids)
+    }
+}
+
+/// A bit per node: which nodes some node has claimed as a child (a node claimed twice: not a
+/// tree).
+struct Claims(Vec<u64>);
+
+impl Claims {
+    fn new(n: usize) -> Self {
+        Self(alloc::vec![0u64; n.div_ceil(64)])
+    }
+
+    /// Claims node `c` (`c` below the `n` of [`new`](Self::new)): `false` if it was already.
+    #[inline(always)]
+    fn claim(&mut self, c: usize) -> bool {
+        let (w, b) = (c / 64, 1u64 << (c % 64));
+        let fresh = self.0[w] & b == 0;
+        self.0[w] |= b;
+        fresh
     }
 }
 
@@ -826,7 +800,8 @@ fn plan_entry(
 /// children among them, after it, and no node is the child of two: `false` where that does not
 /// hold (then the slices hold garbage).
 // PERF: the counts' pass and the plan's took 12.4 and 38 ms on the 1M soup's tree (2M nodes);
-// one pass reads the nodes once.
+// one pass reads the nodes once. (The walk with a stack, which any node order takes, about 40 ns
+// a node.)
 fn fused_range(
     nodes: &[crate::traverse::Node],
     base: usize,
@@ -841,14 +816,8 @@ fn fused_range(
     if end > nodes.len() {
         return false;
     }
-    let mut seen = alloc::vec![0u64; len.div_ceil(64)];
-    let mut claim = |c: usize| {
-        let c = c - base;
-        let (w, b) = (c / 64, 1u64 << (c % 64));
-        let fresh = seen[w] & b == 0;
-        seen[w] |= b;
-        fresh
-    };
+    let mut seen = Claims::new(len);
+    let mut claim = |c: usize| seen.claim(c - base);
     for i in (base..end).rev() {
         let node = &nodes[i];
         let k = i - base;
@@ -978,13 +947,7 @@ fn fused_par(
         }
     }
     // The nodes outside the ranges, from the last to the first.
-    let mut seen = alloc::vec![0u64; n.div_ceil(64)];
-    let mut claim = |c: usize| {
-        let (w, b) = (c / 64, 1u64 << (c % 64));
-        let fresh = seen[w] & b == 0;
-        seen[w] |= b;
-        fresh
-    };
+    let mut seen = Claims::new(n);
     let inside = |x: usize| {
         let k = ranges.partition_point(|r| r.0 <= x);
         k > 0 && x < ranges[k - 1].1
@@ -1008,7 +971,7 @@ fn fused_par(
             let root = ranges
                 .binary_search_by_key(&(l.min(r)), |r| r.0)
                 .is_ok_and(|j| ranges[j].2 == i);
-            if !root && (inside(l) || inside(r) || !claim(l) || !claim(r)) {
+            if !root && (inside(l) || inside(r) || !seen.claim(l) || !seen.claim(r)) {
                 return false;
             }
             counts[i] = counts[l].saturating_add(counts[r]);
@@ -1122,13 +1085,7 @@ fn counts_with_stack(bvh: &Bvh2, counts: &mut [u32]) -> Result<(), CollapseError
 // PERF: the walk with a stack took about 19 ms on the 1M soup's tree (2M nodes).
 fn counts_in_index_order(bvh: &Bvh2, counts: &mut [u32]) -> bool {
     let n = bvh.nodes.len().min(counts.len());
-    let mut seen = vec![0u64; n.div_ceil(64)];
-    let mut claim = |c: usize| {
-        let (w, b) = (c / 64, 1u64 << (c % 64));
-        let fresh = seen[w] & b == 0;
-        seen[w] |= b;
-        fresh
-    };
+    let mut seen = Claims::new(n);
     for i in (0..n).rev() {
         let node = &bvh.nodes[i];
         if node.is_leaf() {
@@ -1136,7 +1093,7 @@ fn counts_in_index_order(bvh: &Bvh2, counts: &mut [u32]) -> bool {
             continue;
         }
         let (l, r) = (node.left() as usize, node.right() as usize);
-        if l <= i || r <= i || l >= n || r >= n || l == r || !claim(l) || !claim(r) {
+        if l <= i || r <= i || l >= n || r >= n || l == r || !seen.claim(l) || !seen.claim(r) {
             return false;
         }
         counts[i] = counts[l].saturating_add(counts[r]);
@@ -1589,8 +1546,8 @@ mod tests {
         assert!(empty.is_empty());
     }
 
-    /// The plan made in index order (trees whose children follow their parents) is the plan of
-    /// the walk with a stack, bit for bit, 4- and 8-wide; trees in another order (the LBVH's,
+    /// The plan made in index order (`fused_range`, trees whose children follow their parents) is
+    /// the plan of the walk with a stack, bit for bit, 4- and 8-wide; trees in another order (the LBVH's,
     /// PLOC's) take the walk.
     #[test]
     fn plan_in_index_order_equals_the_walk() {
@@ -1627,7 +1584,10 @@ mod tests {
                         .iter()
                         .enumerate()
                         .all(|(i, nd)| nd.is_leaf() || (nd.left() as usize > i && nd.right() as usize > i));
-                    assert_eq!(ordered.fill_in_index_order(&bvh, &counts, n_wide), in_order, "{name}");
+                    let mut fused_counts = vec![0; n];
+                    let (d, l) = (&mut ordered.dist, &mut ordered.leaf);
+                    let fused = fused_range(&bvh.nodes, 0, &mut fused_counts, d, l, n_wide, None);
+                    assert_eq!(fused, in_order, "{name}");
                     // The top-down builders' trees are in index order; the others not.
                     assert_eq!(in_order, ["fast", "quality", "median"].contains(&name), "{name}");
                     if in_order {
@@ -1639,6 +1599,7 @@ mod tests {
                                 .collect::<Vec<_>>()
                         };
                         assert_eq!(bits(&ordered), bits(&walked), "{name} {n_wide}");
+                        assert_eq!(fused_counts, counts, "{name} {n_wide}");
                     }
                     let made = Plan::new(&bvh, &counts, n_wide).unwrap();
                     assert_eq!(made.leaf, walked.leaf, "{name} {n_wide}");
