@@ -204,6 +204,16 @@ pub fn check_bvh(case: &BvhCase) {
         }
         let b4 = Bvh4::from_bvh2(&b2, tris).expect("a valid tree collapses");
         let b8 = Bvh8::from_bvh2(&b2, tris).expect("a valid tree collapses");
+        // Saved and read again: the same bytes; one damaged byte (placed by the input) refused.
+        let bytes = b8.to_bytes();
+        let loaded = Bvh8::from_bytes(&bytes).expect("a saved tree loads");
+        assert_eq!(loaded.to_bytes(), bytes, "{params:?}: bytes written again");
+        assert_eq!(Bvh4::from_bytes(&b4.to_bytes()).expect("a saved tree loads").depth(), b4.depth());
+        let at = case.rays.len().wrapping_mul(2_654_435_761) % bytes.len();
+        let mut damaged = bytes.clone();
+        damaged[at] ^= 0x10;
+        assert!(Bvh8::from_bytes(&damaged).is_err(), "{params:?}: damaged byte {at} read");
+        assert!(Bvh8::from_bytes(&bytes[..bytes.len() - 1]).is_err());
         let mut packet_hits = [None; 8];
         packet::intersect8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_hits, packet::DEFAULT_SWITCH);
         let mut packet_pure = [None; 8];

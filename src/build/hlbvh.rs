@@ -30,6 +30,15 @@
 //! sweep's to 0.2% above it, at 140 -> 157 ms; the terrain's from 7.6% to 4.5% above, at
 //! 128 -> 144 ms; the soup and the bunny (no cluster stands out) unchanged.
 //!
+//! Tried and dropped (2026-12-06, Intel Xeon, one thread, best of 3): **mini-trees split along
+//! the Morton curve** (each node of a cluster's run cut where the run is, at the cheapest by the
+//! SAH of `k` equal-count boundaries, every boundary below `k` references; the references never
+//! move). Where `hybrid_sah()`'s time goes on the 1M sphereflake (195 ms): preparing 8 ms, codes
+//! and sort 29, clusters 4.5, mini-trees 128, pruning 6, top 4, layout 14. With `k` = 8 / 64 the
+//! mini-trees took 67 / about 90 ms, but the trees were 16.6% / 7.8% above the binned ones'
+//! SAH cost (59.56 / 55.07 against 51.10; the soup 617.5 / 551.9 against 479.1, the terrain
+//! 47.2 / 41.4 against 36.5): a contiguous run of the curve is a worse box than a binned side.
+//!
 //! **Depth.** With clusters of at most `M` primitives, the top is built with the depth bound
 //! `max_depth - ceil(log2 M)`, so each cluster's bottom (at most `ceil(log2 M)` levels more, by
 //! the LBVH's own bound) fits; the cluster size is capped so that the top still fits a balanced

@@ -25,6 +25,12 @@
 //! rebuild on 1M triangles, at no cost in trace time for small motion (README, "Refitting
 //! animated geometry").
 //!
+//! # Saving and loading
+//! [`BvhWide::to_bytes`] writes a tree; [`BvhWide::from_bytes`] reads it back as a checked copy
+//! (any alignment, any byte order), [`BvhWideRef::from_bytes`] traces the bytes in place (aligned,
+//! `no_std`, no allocation): a 1M-triangle BVH8 loads 14 to 49 times faster than it is built and
+//! collapsed (README, "Saving and loading wide BVHs"). Bad bytes give a [`FormatError`].
+//!
 //! # Instances
 //! [`Tlas`] is the top level of a two-level BVH: [`Instance`]s place wide trees (BLASes) in the
 //! world by affine transforms; rays are traced into each instance's object space (see
@@ -41,6 +47,7 @@
 //!   pad[8]: u32
 //! ```
 
+mod bytes;
 #[cfg(feature = "alloc")]
 mod collapse;
 #[cfg(feature = "alloc")]
@@ -56,6 +63,7 @@ use crate::math::{Lane, f32x4, f32x8};
 #[cfg(feature = "alloc")]
 use alloc::vec::Vec;
 
+pub use bytes::{FormatError, HEADER_BYTES};
 #[cfg(feature = "alloc")]
 pub use collapse::{CollapseError, Collapser};
 #[cfg(feature = "alloc")]
