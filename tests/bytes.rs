@@ -6,10 +6,12 @@ mod common;
 
 use common::{mixed_rays, random_soup};
 use proptest::prelude::*;
-use strahl::build::{BuildParams, Bvh2};
+use strahl::build::{BuildParams, Bvh2, SpatialSplits};
 use strahl::geometry::{Hit, Triangle};
+use strahl::intersect::TriangleLanes;
 use strahl::layout::{
     Bvh4, Bvh8, Bvh8Ref, BvhWide, BvhWideRef, EMPTY_CHILD, FormatError, HEADER_BYTES, LEAF_BIT, MAX_WIDE_DEPTH, Node8,
+    WideNode,
 };
 use strahl::math::{Lane, f32x8};
 use strahl::scene;
@@ -48,7 +50,11 @@ fn same_answers<L: Lane, const N: usize>(a: BvhWideRef<L, N>, b: BvhWideRef<L, N
     }
 }
 
-fn round_trip<L: Lane + bytemuck::Pod, const N: usize>(tree: &BvhWide<L, N>, rays: &[Ray], what: &str) {
+fn round_trip<L: Lane + bytemuck::Pod, const N: usize>(tree: &BvhWide<L, N>, rays: &[Ray], what: &str)
+where
+    WideNode<L, N>: bytemuck::AnyBitPattern,
+    TriangleLanes<L, N>: bytemuck::AnyBitPattern,
+{
     let bytes = tree.to_bytes();
     assert_eq!(bytes.len(), HEADER_BYTES + tree.memory_bytes(), "{what}");
     let loaded = BvhWide::<L, N>::from_bytes(&bytes).unwrap_or_else(|e| panic!("{what}: {e}"));
@@ -114,7 +120,34 @@ fn saved_trees_load_as_the_same_tree() {
                 &rays,
                 &format!("{name} / {pname} / BVH8 greedy"),
             );
+            // Refitted to moved triangles, every seventh collapsed to a point (left out).
+            let moved: Vec<Triangle> = tris
+                .iter()
+                .enumerate()
+                .map(|(i, t)| {
+                    if i % 7 == 0 {
+                        [t[0]; 3]
+                    } else {
+                        t.map(|v| v * 1.1 + Vec3::X)
+                    }
+                })
+                .collect();
+            let mut refitted = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+            refitted.refit(&moved[..]);
+            round_trip(&refitted, &rays, &format!("{name} / {pname} / BVH8 refitted"));
         }
+        // Spatial splits: leaf boxes clip their triangles (not checked), nodes still nest.
+        let (sp, _) = Bvh2::build_spatial(&tris[..], &BuildParams::balanced(), &SpatialSplits::default()).unwrap();
+        round_trip(
+            &Bvh8::from_bvh2(&sp, &tris[..]).unwrap(),
+            &rays,
+            &format!("{name} / spatial / BVH8"),
+        );
+        round_trip(
+            &Bvh4::from_bvh2(&sp, &tris[..]).unwrap(),
+            &rays,
+            &format!("{name} / spatial / BVH4"),
+        );
     }
 }
 
@@ -160,6 +193,20 @@ fn headers_are_checked_field_by_field() {
     );
     // The checksum field itself.
     assert_eq!(Bvh8::from_bytes(&with(48, 12345)).unwrap_err(), FormatError::Checksum);
+    // Counts traded at the same length (11 nodes of 256 bytes for 8 packs of 352): the checksum
+    // covers the header's counts, so the in-place read refuses it too.
+    let (nodes, packs) = (b8.nodes().len() as u32, b8.packs().len() as u32);
+    let traded = {
+        let mut b = with(32, nodes - 11);
+        b[40..44].copy_from_slice(&(packs + 8).to_le_bytes());
+        b
+    };
+    assert_eq!(Bvh8::from_bytes(&traded).unwrap_err(), FormatError::Checksum);
+    let buf = aligned(&traded);
+    assert_eq!(
+        Bvh8Ref::from_bytes(&bytemuck::cast_slice::<Block, u8>(&buf)[..traded.len()]).unwrap_err(),
+        FormatError::Checksum
+    );
     // An 8-wide tree is not a 4-wide one (and the other way round; lanes that do not match the
     // width, such as `BvhWide<f32x4, 8>`, do not compile).
     assert_eq!(Bvh4::from_bytes(&bytes).unwrap_err(), FormatError::Shape);
@@ -263,13 +310,90 @@ fn malformed_trees_with_good_checksums_are_refused() {
     let mut bad_lanes = packs.clone();
     bad_lanes[0].valid |= 1 << 8;
     cases.push(("a lane past N", nodes.clone(), bad_lanes, FormatError::Malformed));
+    // Boxes: an unused slot's not empty, a used one's NaN or empty, a node's child outside it.
+    let (ei, es) = nodes
+        .iter()
+        .enumerate()
+        .find_map(|(i, n)| n.child.iter().position(|&c| c == EMPTY_CHILD).map(|s| (i, s)))
+        .expect("the bunny's BVH8 has an unused slot");
+    let set = |n: &mut Node8, i: usize, lo: Vec3, hi: Vec3| {
+        for a in 0..3 {
+            let (mut l, mut h) = (n.bounds.min[a].to_array(), n.bounds.max[a].to_array());
+            (l[i], h[i]) = (lo[a], hi[a]);
+            (n.bounds.min[a], n.bounds.max[a]) = (f32x8::new(l), f32x8::new(h));
+        }
+    };
+    cases.push((
+        "an unused slot with a box",
+        edit(&|n| set(&mut n[ei], es, Vec3::splat(-1e30), Vec3::splat(1e30))),
+        packs.clone(),
+        FormatError::Malformed,
+    ));
+    let used = |n: &Node8, i: usize| n.bounds.get(i);
+    cases.push((
+        "a NaN in a used box",
+        edit(&|n| {
+            let b = used(&n[pi], ps);
+            set(&mut n[pi], ps, Vec3::new(f32::NAN, b.min.y, b.min.z), b.max)
+        }),
+        packs.clone(),
+        FormatError::Malformed,
+    ));
+    cases.push((
+        "an empty used box",
+        edit(&|n| set(&mut n[li], ls, Vec3::INFINITY, Vec3::NEG_INFINITY)),
+        packs.clone(),
+        FormatError::Malformed,
+    ));
+    cases.push((
+        "a child outside its slot",
+        edit(&|n| {
+            let b = used(&n[pi], ps);
+            set(&mut n[pi], ps, b.min, b.min)
+        }),
+        packs.clone(),
+        FormatError::Malformed,
+    ));
+    // Packs: a valid lane over a degenerate triangle, past the builders' range, or without a
+    // primitive index (the packer marks none of them valid).
+    type Edit<'a> = &'a dyn Fn(&mut [[f32; 8]; 9], &mut [u32; 8]);
+    let lane0 = |f: Edit| {
+        let mut p = packs.clone();
+        let mut v: [[f32; 8]; 9] = core::array::from_fn(|k| p[0].v[k / 3][k % 3].to_array());
+        f(&mut v, &mut p[0].prim);
+        p[0].v = core::array::from_fn(|j| core::array::from_fn(|a| f32x8::new(v[3 * j + a])));
+        assert_eq!(p[0].valid & 1, 1);
+        p
+    };
+    cases.push((
+        "a degenerate triangle marked valid",
+        nodes.clone(),
+        lane0(&|v, _| {
+            for k in 3..9 {
+                v[k][0] = v[k % 3][0];
+            }
+        }),
+        FormatError::Malformed,
+    ));
+    cases.push((
+        "a vertex past the builders' range",
+        nodes.clone(),
+        lane0(&|v, _| (v[3][0], v[6][0]) = (3e38, -3e38)),
+        FormatError::Malformed,
+    ));
+    cases.push((
+        "a valid lane without a primitive",
+        nodes.clone(),
+        lane0(&|_, prim| prim[0] = strahl::geometry::INVALID),
+        FormatError::Malformed,
+    ));
     // A chain one node deeper than traversal takes.
     let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
     let chain: Vec<Node8> = (0..=MAX_WIDE_DEPTH)
         .map(|i| {
             let mut n = Node8::empty();
             n.bounds = strahl::intersect::AabbX8::from_boxes(&[b, b]);
-            n.child[0] = if i == MAX_WIDE_DEPTH { EMPTY_CHILD } else { i + 1 };
+            n.child[0] = if i == MAX_WIDE_DEPTH { LEAF_BIT } else { i + 1 };
             n.child[1] = LEAF_BIT;
             n
         })
@@ -278,7 +402,7 @@ fn malformed_trees_with_good_checksums_are_refused() {
     let ok = chain[1..].to_vec();
     let mut ok = ok;
     for (i, n) in ok.iter_mut().enumerate() {
-        if n.child[0] != EMPTY_CHILD {
+        if n.child[0] != LEAF_BIT {
             n.child[0] = i as u32 + 1;
         }
     }
@@ -300,7 +424,7 @@ fn malformed_trees_with_good_checksums_are_refused() {
             view.write_bytes(&mut b).unwrap();
             b
         };
-        assert_eq!(Bvh8::from_bytes(&bytes).unwrap_err(), err, "{what}");
+        assert_eq!(Bvh8::from_bytes(&bytes).err(), Some(err), "{what}");
         let buf = aligned(&bytes);
         let in_place = Bvh8Ref::from_bytes(&bytemuck::cast_slice::<Block, u8>(&buf)[..bytes.len()]).unwrap();
         assert_eq!(in_place.check(), Err(err), "{what}");

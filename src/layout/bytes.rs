@@ -6,23 +6,24 @@
 //! # Reading
 //! - [`BvhWide::from_bytes`] (`alloc`): copies out of bytes at any alignment, portable across
 //!   byte orders, and checks everything: header, length, checksum, and the tree's structure
-//!   ([`BvhWideRef::check`]: every child code in range, every node but the root the child of
-//!   exactly one node and reached from the root, the depth within [`MAX_WIDE_DEPTH`]), so the
-//!   tree it returns keeps [`BvhWide`]'s invariants.
+//!   ([`BvhWideRef::check`] lists it: the tree, the boxes, the packs' valid lanes), so the tree
+//!   it returns keeps what [`BvhWide::from_bvh2`] guarantees.
 //! - [`BvhWideRef::from_bytes`]: no copy, no allocation (`no_std`): checks header, length and
 //!   checksum and casts the bytes, which must start at a multiple of 64 bytes (a memory map's
 //!   page, or an aligned buffer) on a little-endian machine. A view's traversal never panics and
 //!   always terminates whatever the nodes hold, so the structure check is separate
-//!   ([`BvhWideRef::check`]).
+//!   ([`BvhWideRef::check`]). Only [`Bvh4`](super::Bvh4) and [`Bvh8`](super::Bvh8) shapes.
 
 use super::{BvhWideRef, WideNode};
 use crate::intersect::{AabbLanes, TriangleLanes};
-use crate::math::Lane;
+use crate::math::{Lane, f32x4, f32x8};
 use bytemuck::{AnyBitPattern, Pod, Zeroable};
 use core::mem::{offset_of, size_of};
 #[cfg(feature = "alloc")]
 use {
     super::{BvhWide, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs},
+    crate::Vec3,
+    crate::geometry::{INVALID, Triangle, is_degenerate},
     alloc::vec,
     alloc::vec::Vec,
 };
@@ -45,14 +46,14 @@ use {
 ///  28      reserved   u32 (0)
 ///  32      nodes      u64 (count)
 ///  40      packs      u64 (count)
-///  48      checksum   u64 (of everything after the header)
+///  48      checksum   u64 (of bytes 0..48 and everything after the header)
 ///  56      reserved   u64 (0)
 ///  64      nodes, then packs
 /// ```
 ///
 /// The checksum catches files damaged or altered: changing any one aligned 8-byte word of the
-/// payload always changes it (each step is a bijection of the state); the lengths are checked on
-/// their own.
+/// header's first 48 bytes or of the payload always changes it (each step is a bijection of the
+/// state), so counts traded against each other at the same length are caught too.
 ///
 /// ```
 /// use strahl::layout::{Bvh8, HEADER_BYTES};
@@ -104,8 +105,11 @@ pub enum FormatError {
     /// In-place reading only: the bytes do not start at the nodes' alignment (64 bytes), or the
     /// machine is big-endian.
     Misaligned,
-    /// A child code out of range, a node with two parents or none, a node not reached from the
-    /// root, or a pack with lanes past `N` marked valid.
+    /// Not a tree as the collapse makes them ([`BvhWideRef::check`] lists what is checked): a
+    /// child code out of range, a node with two parents or none or not reached from the root, a
+    /// box that is NaN, empty where used or not empty where unused, a child's boxes outside its
+    /// slot's, or a lane marked valid past `N` or over a degenerate triangle or without a
+    /// primitive index.
     Malformed,
     /// Deeper than [`MAX_WIDE_DEPTH`].
     TooDeep,
@@ -133,28 +137,42 @@ impl core::fmt::Display for FormatError {
 
 impl core::error::Error for FormatError {}
 
-// SAFETY: `WideNode` is `repr(C)` over `[L; 3]` twice and `[u32; N]` twice: with `L` valid for
-// any bit pattern, so is every field, and padding (none for the crate's lane types, whose sizes
-// the layout module asserts) is allowed for `AnyBitPattern`. All-zero bytes are a valid value of
-// every field, so of the node (`Zeroable`).
-unsafe impl<L: AnyBitPattern, const N: usize> Zeroable for WideNode<L, N> {}
-// SAFETY: as above; `Copy` and `'static` hold for `L: AnyBitPattern`.
-unsafe impl<L: AnyBitPattern, const N: usize> AnyBitPattern for WideNode<L, N> {}
-// SAFETY: `TriangleLanes` is `repr(C)` over `[[L; 3]; 3]`, `[u32; N]` and `u32`: every field is
-// valid for any bit pattern (and for zeros) when `L` is; its tail padding is allowed for
-// `AnyBitPattern`, which only ever reads it through shared references or by value.
-unsafe impl<L: AnyBitPattern, const N: usize> Zeroable for TriangleLanes<L, N> {}
-// SAFETY: as above.
-unsafe impl<L: AnyBitPattern, const N: usize> AnyBitPattern for TriangleLanes<L, N> {}
+/// The node and pack types of [`Bvh4`](super::Bvh4) and [`Bvh8`](super::Bvh8) read in place.
+/// Only these two shapes: a node of `N` children must have `N` box lanes, and the collapse makes
+/// no wider ones, so bytes cannot make a node the traversals do not take.
+macro_rules! any_bit_pattern {
+    ($lane:ty, $n:literal) => {
+        // SAFETY: `WideNode` is `repr(C)` over `[L; 3]` twice and `[u32; N]` twice, and
+        // `TriangleLanes` over `[[L; 3]; 3]`, `[u32; N]` and `u32`; `L` (`wide`'s `f32xN`, which is
+        // `Pod`) and `u32` are valid for any bit pattern and for all zeros, so every field is, and
+        // so is the whole. Padding (none in the node; the pack's tail, asserted in the layout
+        // module) is allowed for `AnyBitPattern`, which is only read through shared references
+        // or by value. `Copy` and `'static` hold.
+        unsafe impl Zeroable for WideNode<$lane, $n> {}
+        // SAFETY: as above.
+        unsafe impl AnyBitPattern for WideNode<$lane, $n> {}
+        // SAFETY: as above.
+        unsafe impl Zeroable for TriangleLanes<$lane, $n> {}
+        // SAFETY: as above.
+        unsafe impl AnyBitPattern for TriangleLanes<$lane, $n> {}
+    };
+}
+any_bit_pattern!(f32x4, 4);
+any_bit_pattern!(f32x8, 8);
 
-/// The payload's checksum: eight interleaved lanes over aligned 8-byte words, the tail and the
+/// The checksum of a file: the header's first 48 bytes (all but the checksum and the reserved
+/// word after it), then the payload, as eight interleaved lanes of 8-byte words, the tail and the
 /// length folded in at the end. Each word step `h -> rotl((h ^ w) * K, 29)` is a bijection of `h`
 /// (and of `w`), so any change within one lane's words changes the result.
-fn checksum(bytes: &[u8]) -> u64 {
+fn checksum(head: &[u8], payload: &[u8]) -> u64 {
     const K: u64 = 0x9E37_79B9_7F4A_7C15;
     let step = |h: u64, w: u64| ((h ^ u64::from_le(w)).wrapping_mul(K)).rotate_left(29);
     let mut h: [u64; 8] = core::array::from_fn(|l| K ^ l as u64);
-    let mut blocks = bytes.chunks_exact(64);
+    let mut first = [0u8; 64];
+    first[..48].copy_from_slice(&head[..48]);
+    let w: [u64; 8] = bytemuck::pod_read_unaligned(&first);
+    h = core::array::from_fn(|l| step(h[l], w[l]));
+    let mut blocks = payload.chunks_exact(64);
     for c in &mut blocks {
         let w: [u64; 8] = bytemuck::pod_read_unaligned(c);
         h = core::array::from_fn(|l| step(h[l], w[l]));
@@ -168,7 +186,7 @@ fn checksum(bytes: &[u8]) -> u64 {
         let x = (x ^ (x >> 33)).wrapping_mul(0xFF51_AFD7_ED55_8CCD);
         x ^ (x >> 29)
     };
-    h.iter().enumerate().fold(bytes.len() as u64, |acc, (l, &x)| {
+    h.iter().enumerate().fold(payload.len() as u64, |acc, (l, &x)| {
         acc ^ mix(x).rotate_left(8 * l as u32)
     })
 }
@@ -215,7 +233,7 @@ fn read_header<L: Lane, const N: usize>(bytes: &[u8]) -> Result<(usize, usize), 
     if expected != len {
         return Err(FormatError::Length { expected, found: len });
     }
-    if checksum(&bytes[HEADER_BYTES..]) != u64_at(48) {
+    if checksum(&bytes[..HEADER_BYTES], &bytes[HEADER_BYTES..]) != u64_at(48) {
         return Err(FormatError::Checksum);
     }
     Ok((nodes as usize, packs as usize))
@@ -255,7 +273,11 @@ fn get<T: AnyBitPattern>(b: &[u8]) -> T {
     }
 }
 
-impl<'a, L: Lane + Pod, const N: usize> BvhWideRef<'a, L, N> {
+impl<'a, L: Lane + Pod, const N: usize> BvhWideRef<'a, L, N>
+where
+    WideNode<L, N>: AnyBitPattern,
+    TriangleLanes<L, N>: AnyBitPattern,
+{
     /// Bytes [`write_bytes`](Self::write_bytes) writes: the header, the nodes and the packs.
     ///
     /// ```
@@ -324,7 +346,6 @@ impl<'a, L: Lane + Pod, const N: usize> BvhWideRef<'a, L, N> {
             put(payload, o + prim, &pack.prim[..]);
             put(payload, o + valid, core::slice::from_ref(&pack.valid));
         }
-        let sum = checksum(payload);
         head[..8].copy_from_slice(MAGIC);
         for (k, x) in [VERSION, N as u32, L::N as u32, node_bytes as u32, pack_bytes as u32]
             .into_iter()
@@ -332,12 +353,14 @@ impl<'a, L: Lane + Pod, const N: usize> BvhWideRef<'a, L, N> {
         {
             head[8 + 4 * k..12 + 4 * k].copy_from_slice(&x.to_le_bytes());
         }
-        for (k, x) in [self.nodes.len() as u64, self.packs.len() as u64, sum]
+        for (k, x) in [self.nodes.len() as u64, self.packs.len() as u64]
             .into_iter()
             .enumerate()
         {
             head[32 + 8 * k..40 + 8 * k].copy_from_slice(&x.to_le_bytes());
         }
+        let sum = checksum(head, payload);
+        head[48..56].copy_from_slice(&sum.to_le_bytes());
         Ok(total)
     }
 
@@ -392,11 +415,21 @@ impl<'a, L: Lane + Pod, const N: usize> BvhWideRef<'a, L, N> {
         Ok(Self { nodes, packs })
     }
 
-    /// Checks that the nodes form a tree over the packs, and returns its depth (root = 1, 0 for
-    /// no nodes): every child code an unused slot ([`EMPTY_CHILD`]), a leaf whose packs exist, or
-    /// a node other than the root; every node but the root the child of exactly one node and
-    /// reached from the root; the depth at most [`MAX_WIDE_DEPTH`]; no pack marking lanes past
-    /// `N` valid. [`BvhWide::from_bvh2`]'s trees always pass.
+    /// Checks that the nodes form a tree over the packs, as [`BvhWide::from_bvh2`] makes them,
+    /// and returns its depth (root = 1, 0 for no nodes):
+    ///
+    /// - every child code an unused slot ([`EMPTY_CHILD`]) whose box is the empty box, a leaf
+    ///   whose packs exist, or a node other than the root; every used slot's box free of NaN and
+    ///   not empty;
+    /// - every node but the root the child of exactly one node and reached from the root; the
+    ///   depth at most [`MAX_WIDE_DEPTH`];
+    /// - a node's box in its parent's slot holding all of its own slots' boxes (the leaves'
+    ///   boxes are not checked against their triangles: a spatial-split tree's leaves clip them);
+    /// - every lane a pack marks valid within `N`, with a primitive index (not
+    ///   [`INVALID`]) and a triangle the packer would mark valid:
+    ///   not degenerate, its coordinates within the builders' range.
+    ///
+    /// [`BvhWide::from_bvh2`]'s trees always pass.
     ///
     /// ```
     /// use strahl::layout::{Bvh8, Bvh8Ref, FormatError};
@@ -411,18 +444,48 @@ impl<'a, L: Lane + Pod, const N: usize> BvhWideRef<'a, L, N> {
     #[cfg(feature = "alloc")]
     pub fn check(&self) -> Result<u32, FormatError> {
         let n = self.nodes.len();
-        if self.packs.iter().any(|p| N < 32 && p.valid >> N != 0) {
+        // Each valid lane's triangle as the packer would judge it (the pack's lanes stored once).
+        let pack_ok = |p: &TriangleLanes<L, N>| {
+            if p.valid >> N != 0 {
+                return false;
+            }
+            let mut v = [[0.0f32; 8]; 9];
+            for (k, lanes) in v.iter_mut().enumerate() {
+                p.v[k / 3][k % 3].store(&mut lanes[..N]);
+            }
+            (0..N).all(|i| {
+                let t: Triangle = core::array::from_fn(|j| Vec3::new(v[3 * j][i], v[3 * j + 1][i], v[3 * j + 2][i]));
+                p.valid >> i & 1 == 0 || (p.prim[i] != INVALID && !is_degenerate(&t) && super::refit::kept(&t))
+            })
+        };
+        if !self.packs.iter().all(pack_ok) {
             return Err(FormatError::Malformed);
         }
         if n == 0 {
             return Ok(0);
         }
-        // Parents: every node at most one, the root none.
+        // Slot `i`'s box as `(min, max)`.
+        let slot = |node: &WideNode<L, N>, i: usize| {
+            let b = &node.bounds;
+            (
+                Vec3::new(b.min[0].lane(i), b.min[1].lane(i), b.min[2].lane(i)),
+                Vec3::new(b.max[0].lane(i), b.max[1].lane(i), b.max[2].lane(i)),
+            )
+        };
+        // Parents: every node at most one, the root none; the slots' boxes.
         let mut parented = vec![false; n];
         for node in self.nodes {
-            for &c in &node.child {
+            for (i, &c) in node.child.iter().enumerate() {
+                let (lo, hi) = slot(node, i);
                 if c == EMPTY_CHILD {
+                    if lo != Vec3::INFINITY || hi != Vec3::NEG_INFINITY {
+                        return Err(FormatError::Malformed);
+                    }
                     continue;
+                }
+                // Not NaN, not empty (`lo <= hi` fails for both).
+                if !lo.cmple(hi).all() {
+                    return Err(FormatError::Malformed);
                 }
                 if c & LEAF_BIT != 0 {
                     let (first, count) = leaf_packs(c);
@@ -434,6 +497,14 @@ impl<'a, L: Lane + Pod, const N: usize> BvhWideRef<'a, L, N> {
                 let c = c as usize;
                 if c == 0 || c >= n || core::mem::replace(&mut parented[c], true) {
                     return Err(FormatError::Malformed);
+                }
+                // The child's slots within this slot.
+                let inner = &self.nodes[c];
+                for (k, &cc) in inner.child.iter().enumerate() {
+                    let (clo, chi) = slot(inner, k);
+                    if cc != EMPTY_CHILD && !(lo.cmple(clo).all() && chi.cmple(hi).all()) {
+                        return Err(FormatError::Malformed);
+                    }
                 }
             }
         }
@@ -459,7 +530,11 @@ impl<'a, L: Lane + Pod, const N: usize> BvhWideRef<'a, L, N> {
 }
 
 #[cfg(feature = "alloc")]
-impl<L: Lane + Pod, const N: usize> BvhWide<L, N> {
+impl<L: Lane + Pod, const N: usize> BvhWide<L, N>
+where
+    WideNode<L, N>: AnyBitPattern,
+    TriangleLanes<L, N>: AnyBitPattern,
+{
     /// The tree as bytes (the format is described at [`HEADER_BYTES`]), to store and read again with
     /// [`from_bytes`](Self::from_bytes) or trace in place with [`BvhWideRef::from_bytes`].
     ///
@@ -482,8 +557,8 @@ impl<L: Lane + Pod, const N: usize> BvhWide<L, N> {
 
     /// Reads a tree from bytes at any alignment (copied; portable across byte orders), checked
     /// in full: header, length, checksum and structure ([`BvhWideRef::check`]), so the tree keeps
-    /// the invariants traversal is exact under. Loading a million triangles' BVH8 takes a small
-    /// part of building it (README, "Saving and loading").
+    /// what [`from_bvh2`](Self::from_bvh2) guarantees. Loading a million triangles' BVH8 takes a
+    /// small part of building it (README, "Saving and loading wide BVHs").
     ///
     /// ```
     /// use strahl::{Ray, Vec3, layout::{Bvh8, FormatError}, traverse::Watertight};
@@ -593,13 +668,22 @@ mod tests {
     #[test]
     fn the_checksum_sees_every_word() {
         let bytes: Vec<u8> = (0..1000u32).map(|i| (i * 37 % 251) as u8).collect();
-        let sum = checksum(&bytes);
+        let head: Vec<u8> = (0..64u8).collect();
+        let sum = checksum(&head, &bytes);
         for at in 0..bytes.len() {
             let mut b = bytes.clone();
             b[at] = b[at].wrapping_add(1 + (at % 200) as u8);
-            assert_ne!(checksum(&b), sum, "byte {at}");
+            assert_ne!(checksum(&head, &b), sum, "byte {at}");
         }
-        assert_ne!(checksum(&bytes[..999]), sum);
-        assert_ne!(checksum(&[0u8; 8]), checksum(&[0u8; 9]));
+        for at in 0..48 {
+            let mut h = head.clone();
+            h[at] ^= 0x40;
+            assert_ne!(checksum(&h, &bytes), sum, "header byte {at}");
+        }
+        let mut h = head.clone();
+        h[50] ^= 1; // the checksum's own bytes are not summed
+        assert_eq!(checksum(&h, &bytes), sum);
+        assert_ne!(checksum(&head, &bytes[..999]), sum);
+        assert_ne!(checksum(&head, &[0u8; 8]), checksum(&head, &[0u8; 9]));
     }
 }

@@ -28,7 +28,7 @@
 //! # Saving and loading
 //! [`BvhWide::to_bytes`] writes a tree; [`BvhWide::from_bytes`] reads it back as a checked copy
 //! (any alignment, any byte order), [`BvhWideRef::from_bytes`] traces the bytes in place (aligned,
-//! `no_std`, no allocation): a 1M-triangle BVH8 loads 14 to 49 times faster than it is built and
+//! `no_std`, no allocation): a 1M-triangle BVH8 loads 9 to 55 times faster than it is built and
 //! collapsed (README, "Saving and loading wide BVHs"). Bad bytes give a [`FormatError`].
 //!
 //! # Instances
@@ -159,7 +159,8 @@ const _: () = assert!(core::mem::size_of::<TriangleLanes<f32x8, 8>>() == 8 * 4 *
 
 impl<L: Lane, const N: usize> WideNode<L, N> {
     /// One box lane per child slot: the traversals read child `i` for a hit in lane `i`.
-    const LANES_MATCH: () = assert!(L::N == N, "a wide node needs a lane type with N lanes");
+    /// (No wider than 8: the traversals' per-node arrays hold 8 lanes.)
+    const LANES_MATCH: () = assert!(L::N == N && N <= 8, "a wide node needs a lane type with N <= 8 lanes");
 
     /// A node with every slot empty.
     ///
@@ -170,12 +171,18 @@ impl<L: Lane, const N: usize> WideNode<L, N> {
     /// assert!((0..8).all(|i| n.bounds.get(i).is_empty()));
     /// ```
     ///
-    /// The lane type must have `N` lanes, one box per child slot (this is the only way to make a
+    /// The lane type must have `N` lanes, one box per child slot, and `N` be at most 8 (this and,
+    /// for [`Node4`] and [`Node8`] only, `bytemuck::Zeroable::zeroed` are the only ways to make a
     /// node outside the crate, so every view's nodes have it):
     ///
     /// ```compile_fail
     /// use strahl::{layout::WideNode, math::f32x8};
     /// let n = WideNode::<f32x8, 4>::empty(); // 8 box lanes for 4 children: a compile error
+    /// ```
+    ///
+    /// ```compile_fail
+    /// use strahl::{layout::WideNode, math::f32x16};
+    /// let n = WideNode::<f32x16, 16>::empty(); // wider than the traversals take: a compile error
     /// ```
     pub fn empty() -> Self {
         let () = Self::LANES_MATCH;
