@@ -293,7 +293,8 @@ where
     }
 
     /// Writes the tree into `out` (at least [`byte_len`](Self::byte_len) bytes; the rest is left
-    /// as it is) and returns the bytes written; no allocation. The format is described at [`HEADER_BYTES`].
+    /// as it is) and returns the bytes written; no allocation. The format is described at
+    /// [`HEADER_BYTES`].
     ///
     /// ```
     /// use strahl::{Ray, Vec3, layout::{Bvh8, Bvh8Ref, FormatError}, traverse::Moller};
