@@ -13,14 +13,18 @@
 //!                   └────────► intersect ◄────────────┘  slab test, Möller-Trumbore, watertight
 //!  volumes ──► volume (ray marching) ──► composite (over / depth, sort-last schedules)
 //! ```
-//! Present today: [`geometry`] (boxes, rays, hits, zero-copy triangle input, Morton codes),
-//! [`intersect`] (robust slab test, Möller-Trumbore and watertight ray/triangle tests in scalar,
-//! x4, x8 and packet form), [`composite`] (sort-last compositing: over and depth kernels,
-//! direct-send, binary-swap and radix-k schedules, in-process and MPI transports, a tile queue),
-//! [`build`] (BVH2 builders: object median, binned and full-sweep SAH, LBVH; `validate`, `refit`,
-//! SAH cost), [`traverse`] (scalar BVH2 closest-hit and any-hit reference),
-//! [`math`] (lane types) and [`scene`] (bundled bunny, procedural meshes).
-//! Wide BVHs and their traversal, volume rendering and compositing follow.
+//! The modules: [`geometry`] (boxes, rays, hits, zero-copy triangle input, Morton codes, robust
+//! secondary-ray origins), [`intersect`] (robust slab test, Möller-Trumbore and watertight
+//! ray/triangle tests in scalar, x4, x8 and packet form, an `f64` reference), [`build`] (BVH2
+//! builders: object median, full-sweep and binned SAH, LBVH, HLBVH, PLOC, spatial splits; treelet
+//! restructuring, rotations and reinsertion; `validate`, `refit`, SAH cost; parallel builds with
+//! `std`), [`layout`] (BVH4/BVH8 collapsed from any BVH2, refit, instancing with a TLAS, saving
+//! and loading, in place from a memory map), [`traverse`] (the scalar BVH2 reference, single-ray
+//! BVH4/BVH8 closest and any hit, batches, ray packets, ray streams, hit filters), [`volume`]
+//! (absorption + emission ray marching, transfer functions, empty-space skipping),
+//! [`composite`] (sort-last compositing: over and depth kernels, direct-send, binary-swap and
+//! radix-k schedules, in-process and MPI transports, a tile queue), [`math`] (lane types) and
+//! [`scene`] (bundled bunny, procedural meshes, OBJ reader).
 //!
 //! ## Example
 //! ```
