@@ -38,6 +38,9 @@
 //! mini-trees took 67 / about 90 ms, but the trees were 16.6% / 7.8% above the binned ones'
 //! SAH cost (59.56 / 55.07 against 51.10; the soup 617.5 / 551.9 against 479.1, the terrain
 //! 47.2 / 41.4 against 36.5): a contiguous run of the curve is a worse box than a binned side.
+//! Nor did **sampled binning inside the mini-trees** pay (`STRAHL_CUSTOM=8,allbutsmall,S,hybrid`
+//! in `tests/build_speed.rs`, best of 3): sphereflake 203 ms / SAH 51.10 without, 199 / 53.71
+//! with `bin_sample` 64, 200 / 52.26 with 128; the soup 185 / 479.1, 249 / 480.6, 183 / 479.4.
 //!
 //! **Depth.** With clusters of at most `M` primitives, the top is built with the depth bound
 //! `max_depth - ceil(log2 M)`, so each cluster's bottom (at most `ceil(log2 M)` levels more, by
