@@ -23,7 +23,7 @@ use core::mem::{offset_of, size_of};
 use {
     super::{BvhWide, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs},
     crate::Vec3,
-    crate::geometry::{INVALID, Triangle, is_degenerate},
+    crate::geometry::INVALID,
     alloc::vec,
     alloc::vec::Vec,
 };
@@ -445,19 +445,29 @@ where
     #[cfg(feature = "alloc")]
     pub fn check(&self) -> Result<u32, FormatError> {
         let n = self.nodes.len();
-        // Each valid lane's triangle as the packer would judge it (the pack's lanes stored once).
+        // Each valid lane's triangle as the packer would judge it, all lanes at once: finite,
+        // not degenerate (`geometry::is_degenerate`: a zero cross product of the edges; the
+        // products are the same, and a difference's sign does not change whether it is zero) and
+        // within the builders' range (`refit::kept`: the box's extent and centre finite).
         let pack_ok = |p: &TriangleLanes<L, N>| {
-            if p.valid >> N != 0 {
-                return false;
+            let [a, b, c] = p.v;
+            let inf = L::splat(f32::INFINITY);
+            let finite = |x: L| x.abs().lt(inf);
+            let mut ok = L::splat(-0.0).eq(L::splat(0.0)); // all lanes set
+            for k in 0..3 {
+                ok = ok & finite(a[k]) & finite(b[k]) & finite(c[k]);
+                let (lo, hi) = (a[k].min_l(b[k]).min_l(c[k]), a[k].max_l(b[k]).max_l(c[k]));
+                ok = ok & finite(hi - lo) & finite(hi + lo);
             }
-            let mut v = [[0.0f32; 8]; 9];
-            for (k, lanes) in v.iter_mut().enumerate() {
-                p.v[k / 3][k % 3].store(&mut lanes[..N]);
-            }
-            (0..N).all(|i| {
-                let t: Triangle = core::array::from_fn(|j| Vec3::new(v[3 * j][i], v[3 * j + 1][i], v[3 * j + 2][i]));
-                p.valid >> i & 1 == 0 || (p.prim[i] != INVALID && !is_degenerate(&t) && super::refit::kept(&t))
-            })
+            let (e1, e2) = ([0, 1, 2].map(|k| b[k] - a[k]), [0, 1, 2].map(|k| c[k] - a[k]));
+            let zero = L::splat(0.0);
+            let n = [1, 2, 0].map(|k| {
+                let (j, l) = (k, (k + 1) % 3);
+                e1[j] * e2[l] - e2[j] * e1[l]
+            });
+            ok = ok & (n[0].ne(zero) | n[1].ne(zero) | n[2].ne(zero));
+            let valid = p.valid;
+            valid >> N == 0 && valid & !ok.bitmask() == 0 && (0..N).all(|i| valid >> i & 1 == 0 || p.prim[i] != INVALID)
         };
         if !self.packs.iter().all(pack_ok) {
             return Err(FormatError::Malformed);
@@ -662,6 +672,75 @@ mod tests {
             wide::intersect::<Moller, _, 4>(view, &ray),
             b4.intersect::<Moller>(&ray)
         );
+    }
+
+    /// `check` judges each valid lane as the packer and the builders would (`is_degenerate`,
+    /// `refit::kept`, a primitive index), all lanes at once, on adversarial coordinates.
+    #[test]
+    fn lanes_are_judged_as_the_packer_judges_them() {
+        use crate::geometry::{INVALID, Triangle, is_degenerate};
+        use crate::layout::{Bvh8Ref, LEAF_BIT, Node8};
+        use crate::scene::Rng;
+        let values = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            1e-30,
+            -1e-30,
+            1e-40,
+            1e30,
+            1.7e38,
+            -1.7e38,
+            3e38,
+            f32::INFINITY,
+            f32::NAN,
+        ];
+        let mut rng = Rng::new(3);
+        let mut node = Node8::empty();
+        node.child[0] = LEAF_BIT;
+        node.bounds = crate::intersect::AabbX8::from_boxes(&[crate::Aabb::new(Vec3::splat(-1.0), Vec3::ONE)]);
+        let (mut accepted, mut refused) = (0, 0);
+        for round in 0..2000usize {
+            let pick = |rng: &mut Rng| {
+                if rng.u64().is_multiple_of(3) {
+                    rng.range(-2.0, 2.0)
+                } else {
+                    values[(rng.u64() % values.len() as u64) as usize]
+                }
+            };
+            let vertex = |rng: &mut Rng| Vec3::new(pick(rng), pick(rng), pick(rng));
+            let tris: [Triangle; 8] = core::array::from_fn(|_| {
+                let v0 = vertex(&mut rng);
+                // Some repeat a vertex or lie on a line: degenerate by construction.
+                match rng.u64() % 4 {
+                    0 => [v0, v0, vertex(&mut rng)],
+                    1 => [v0, v0 * 2.0, v0 * 3.0],
+                    _ => [v0, vertex(&mut rng), vertex(&mut rng)],
+                }
+            });
+            let mut pack = crate::intersect::TriangleX8::pack(&tris, &[]);
+            if round.is_multiple_of(5) {
+                pack.prim[round % 8] = INVALID;
+            }
+            for (i, t) in tris.iter().enumerate() {
+                pack.valid = 1 << i;
+                let want = pack.prim[i] != INVALID && !is_degenerate(t) && crate::layout::refit::kept(t);
+                let got = Bvh8Ref {
+                    nodes: &[node],
+                    packs: &[pack],
+                }
+                .check();
+                assert_eq!(got.is_ok(), want, "{t:?} prim {}", pack.prim[i]);
+                if want {
+                    accepted += 1;
+                } else {
+                    refused += 1;
+                }
+            }
+        }
+        assert!(accepted > 1000 && refused > 1000, "{accepted} / {refused}");
     }
 
     /// A change confined to one 8-byte word always changes the checksum (each step is a

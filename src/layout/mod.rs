@@ -28,7 +28,7 @@
 //! # Saving and loading
 //! [`BvhWide::to_bytes`] writes a tree; [`BvhWide::from_bytes`] reads it back as a checked copy
 //! (any alignment, any byte order), [`BvhWideRef::from_bytes`] traces the bytes in place (aligned,
-//! `no_std`, no allocation): a 1M-triangle BVH8 loads 9 to 55 times faster than it is built and
+//! `no_std`, no allocation): a 1M-triangle BVH8 loads 10 to 40 times faster than it is built and
 //! collapsed (README, "Saving and loading wide BVHs"). Bad bytes give a [`FormatError`].
 //!
 //! # Instances
