@@ -100,54 +100,43 @@ fn saved_trees_load_as_the_same_tree() {
         } else {
             mixed_rays(&tris, 300, 3)
         };
-        for (pname, p) in [
-            ("fastest", BuildParams::fastest()),
-            ("balanced", BuildParams::balanced()),
-        ] {
-            let (b2, _) = Bvh2::build(&tris[..], &p).unwrap();
+        // Spatial splits too: leaf boxes clip their triangles (not checked), nodes still nest.
+        let trees = [
+            ("fastest", Bvh2::build(&tris[..], &BuildParams::fastest()).unwrap().0),
+            ("balanced", Bvh2::build(&tris[..], &BuildParams::balanced()).unwrap().0),
+            (
+                "spatial",
+                Bvh2::build_spatial(&tris[..], &BuildParams::balanced(), &SpatialSplits::default())
+                    .unwrap()
+                    .0,
+            ),
+        ];
+        // Refitted to moved triangles, every seventh collapsed to a point (left out).
+        let moved: Vec<Triangle> = tris
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                if i % 7 == 0 {
+                    [t[0]; 3]
+                } else {
+                    t.map(|v| v * 1.1 + Vec3::X)
+                }
+            })
+            .collect();
+        for (pname, b2) in &trees {
+            let what = |kind: &str| format!("{name} / {pname} / {kind}");
+            round_trip(&Bvh4::from_bvh2(b2, &tris[..]).unwrap(), &rays, &what("BVH4"));
+            let b8 = Bvh8::from_bvh2(b2, &tris[..]).unwrap();
+            round_trip(&b8, &rays, &what("BVH8"));
             round_trip(
-                &Bvh4::from_bvh2(&b2, &tris[..]).unwrap(),
+                &Bvh8::from_bvh2_greedy(b2, &tris[..]).unwrap(),
                 &rays,
-                &format!("{name} / {pname} / BVH4"),
+                &what("BVH8 greedy"),
             );
-            round_trip(
-                &Bvh8::from_bvh2(&b2, &tris[..]).unwrap(),
-                &rays,
-                &format!("{name} / {pname} / BVH8"),
-            );
-            round_trip(
-                &Bvh8::from_bvh2_greedy(&b2, &tris[..]).unwrap(),
-                &rays,
-                &format!("{name} / {pname} / BVH8 greedy"),
-            );
-            // Refitted to moved triangles, every seventh collapsed to a point (left out).
-            let moved: Vec<Triangle> = tris
-                .iter()
-                .enumerate()
-                .map(|(i, t)| {
-                    if i % 7 == 0 {
-                        [t[0]; 3]
-                    } else {
-                        t.map(|v| v * 1.1 + Vec3::X)
-                    }
-                })
-                .collect();
-            let mut refitted = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+            let mut refitted = b8;
             refitted.refit(&moved[..]);
-            round_trip(&refitted, &rays, &format!("{name} / {pname} / BVH8 refitted"));
+            round_trip(&refitted, &rays, &what("BVH8 refitted"));
         }
-        // Spatial splits: leaf boxes clip their triangles (not checked), nodes still nest.
-        let (sp, _) = Bvh2::build_spatial(&tris[..], &BuildParams::balanced(), &SpatialSplits::default()).unwrap();
-        round_trip(
-            &Bvh8::from_bvh2(&sp, &tris[..]).unwrap(),
-            &rays,
-            &format!("{name} / spatial / BVH8"),
-        );
-        round_trip(
-            &Bvh4::from_bvh2(&sp, &tris[..]).unwrap(),
-            &rays,
-            &format!("{name} / spatial / BVH4"),
-        );
     }
 }
 
