@@ -26,7 +26,23 @@
 //! radix-k schedules, in-process and MPI transports, a tile queue), [`math`] (lane types) and
 //! [`scene`] (bundled bunny, procedural meshes, OBJ reader).
 //!
-//! ## Example
+//! ## Example: a mesh, a BVH8, hits
+//! ```
+//! use strahl::build::{BuildParams, Bvh2};
+//! use strahl::{Ray, Vec3, geometry::IndexedMesh, layout::Bvh8, traverse::Watertight};
+//! // Your buffers, borrowed: a square at z = 1 as two triangles.
+//! let positions = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].map(|[x, y]| Vec3::new(x, y, 1.0));
+//! let mesh = IndexedMesh::new(&positions, &[[0, 1, 2], [0, 2, 3]]);
+//! let (bvh2, _stats) = Bvh2::build(&mesh, &BuildParams::default()).unwrap();
+//! let bvh8 = Bvh8::from_bvh2(&bvh2, &mesh).unwrap(); // 8-wide nodes, SoA triangle leaves
+//! let hit = bvh8.intersect::<Watertight>(&Ray::new(Vec3::new(-0.5, 0.5, 0.0), Vec3::Z)).unwrap();
+//! assert_eq!((hit.t, hit.prim), (1.0, 1)); // distance, and the triangle's index in your buffer
+//! // Any hit in [tmin, tmax): a shadow ray that stops short of the square.
+//! assert!(!bvh8.occluded::<Watertight>(&Ray::with_range(Vec3::ZERO, Vec3::Z, 0.0, 0.9)));
+//! ```
+//! The README's "Using it in your engine" goes on to secondary-ray origins, batches and saving.
+//!
+//! ## Example: one kernel
 //! ```
 //! use strahl::{Ray, Vec3, intersect::{PreparedRay, TriangleX8, watertight}};
 //! let tri = [Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)];
@@ -97,3 +113,8 @@ pub use geometry::{Aabb, Hit, Ray};
 /// ```
 pub use glam;
 pub use glam::Vec3;
+
+/// The README's Rust blocks (its usage example), compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;
