@@ -5,6 +5,7 @@
 //! ```text
 //! cargo bench --bench build -- --noplot                       # bunny and the 1M-triangle soup
 //! cargo bench --features embree --bench build -- --noplot     # + Embree 3's rtcBuildBVH
+//! cargo bench --features embree,tinybvh --bench build -- --noplot   # + tinybvh (see below)
 //! STRAHL_BENCH_SCENES=all cargo bench --bench build -- --noplot   # + 1M terrain, 1M sphereflake
 //! STRAHL_BENCH_SCENES=terrain1M,sphereflake1M cargo bench ...     # any list of the four
 //! cargo bench --bench build -- --noplot build_threads         # the parallel builds only
@@ -47,6 +48,14 @@
 //!   for up to 2 references per triangle): Embree's spatial-split builder, the peer of strahl's
 //!   `spatial` members (both checked with `Bvh2::validate_split`; where Embree's leaves hold both
 //!   parts of a triangle, it is kept once in the converted tree).
+//!
+//! - `peer/tinybvh/<builder>` (feature `tinybvh`; `bash benches/peers/tinybvh_fetch.sh` and
+//!   `TINYBVH_DIR`): tinybvh 1.6.8 (Jacco Bikker's single-header C++ library), compiled with
+//!   `-O3 -march=native` and `NO_THREADED_BUILDS`: `Build` (binned SAH, 8 bins on three axes
+//!   over the node's box, the SAH leaf rule with `C_T = C_I = 1`) and `BuildAVX` (the same with
+//!   AVX binning). Its input is a vertex array (three 16-byte vertices per triangle), converted
+//!   untimed; the triangles' boxes are computed inside its timed build. Warm: one `BVH` object
+//!   rebuilt; cold: a new one per build.
 //!
 //! Every peer's build time includes computing the triangles' boxes, as strahl's does. Each peer's
 //! tree is then converted (untimed) to a strahl `Bvh2`, depth first with siblings adjacent and the
@@ -600,6 +609,64 @@ impl Peer for EmbreePeer<'_> {
     }
 }
 
+/// tinybvh's binary builders (feature `tinybvh`). Its input is the vertex array (three
+/// 16-byte vertices per triangle), converted untimed.
+#[cfg(feature = "tinybvh")]
+struct TinybvhPeer {
+    builder: peers::tinybvh::Builder,
+    label: &'static str,
+    tris: Vec<Triangle>,
+    cold_out: Option<peers::tinybvh::Bvh>,
+    warm_out: peers::tinybvh::Bvh,
+}
+
+#[cfg(feature = "tinybvh")]
+impl TinybvhPeer {
+    fn new(tris: &[Triangle], label: &'static str, builder: peers::tinybvh::Builder) -> Self {
+        Self {
+            builder,
+            label,
+            tris: tris.to_vec(),
+            cold_out: None,
+            warm_out: peers::tinybvh::Bvh::new(tris),
+        }
+    }
+}
+
+#[cfg(feature = "tinybvh")]
+impl Peer for TinybvhPeer {
+    fn name(&self) -> String {
+        format!("peer/tinybvh/{}", self.label)
+    }
+    fn cold(&mut self) -> Duration {
+        self.cold_out = None;
+        // A fresh tree (no memory from an earlier build); the vertices are its input.
+        let mut fresh = peers::tinybvh::Bvh::new(&self.tris);
+        let (_, t) = timed(|| fresh.build(self.builder));
+        self.cold_out = Some(fresh);
+        t
+    }
+    fn warm(&mut self) -> Option<Duration> {
+        let (_, t) = timed(|| self.warm_out.build(self.builder));
+        Some(t)
+    }
+    fn tree(&self) -> Bvh2 {
+        let bvh = self.cold_out.as_ref().unwrap_or(&self.warm_out);
+        let (nodes, prim_idx) = bvh.tree();
+        let root = nodes.first().map(|n| (n.aabb(), 0usize));
+        convert(root, |i, prims| {
+            let n = &nodes[i];
+            let first = n.index as usize;
+            if n.count > 0 {
+                prims.extend_from_slice(&prim_idx[first..first + n.count as usize]);
+                None
+            } else {
+                Some([(nodes[first].aabb(), first), (nodes[first + 1].aabb(), first + 1)])
+            }
+        })
+    }
+}
+
 /// The peers for one scene (their inputs converted here, untimed).
 fn peers_for<'d>(s: &Scene, #[cfg(feature = "embree")] device: &'d peers::embree::Device) -> Vec<Box<dyn Peer + 'd>> {
     let mut v: Vec<Box<dyn Peer + 'd>> = vec![Box::new(BvhCratePeer::new(&s.tris))];
@@ -616,6 +683,13 @@ fn peers_for<'d>(s: &Scene, #[cfg(feature = "embree")] device: &'d peers::embree
             ("high+splits", Quality::High, true),
         ] {
             v.push(Box::new(EmbreePeer::new(device, &s.tris, label, q, split)));
+        }
+    }
+    #[cfg(feature = "tinybvh")]
+    {
+        use peers::tinybvh::Builder as B;
+        for (label, b) in [("Build", B::Build), ("BuildAVX", B::BuildAvx)] {
+            v.push(Box::new(TinybvhPeer::new(&s.tris, label, b)));
         }
     }
     v
@@ -844,7 +918,7 @@ fn summary(s: &Scene, peers: &mut [Box<dyn Peer + '_>], fastest: &Fastest) -> Ve
 }
 
 fn family_of(name: &str) -> &'static str {
-    ["bvh", "obvhs", "embree"]
+    ["bvh", "obvhs", "embree", "tinybvh"]
         .into_iter()
         .find(|f| name.starts_with(&format!("peer/{f}/")))
         .unwrap_or("strahl")
@@ -923,6 +997,7 @@ fn family_color(f: &str) -> RGBColor {
         "strahl" => RGBColor(31, 119, 180),
         "bvh" => RGBColor(255, 127, 14),
         "obvhs" => RGBColor(44, 160, 44),
+        "tinybvh" => RGBColor(148, 103, 189),
         _ => RGBColor(214, 39, 40),
     }
 }
@@ -982,7 +1057,7 @@ fn panel(
         steps.push((x, y));
     }
     chart.draw_series(LineSeries::new(steps, BLACK.mix(0.4).stroke_width(1)))?;
-    for family in ["strahl", "bvh", "obvhs", "embree"] {
+    for family in ["strahl", "bvh", "obvhs", "embree", "tinybvh"] {
         let c = family_color(family);
         let mine: Vec<&(usize, f64, f64)> = pts.iter().filter(|p| rows[p.0].family == family).collect();
         if mine.is_empty() {

@@ -22,7 +22,14 @@
 //! of 256 rays; its peer is Embree's stream API, `embree_rtcIntersect1M`/`embree_rtcOccluded1M`
 //! (256 rays a call, the context flagged coherent for the camera rays, incoherent otherwise).
 //!
-//! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree). With
+//! `tinybvh_bvh8_cpu_Intersect` / `tinybvh_bvh8_cpu_IsOccluded` (feature `tinybvh`, see
+//! `benches/peers/tinybvh.rs`): tinybvh 1.6.8's `BVH8_CPU` (its fastest CPU single-ray layout:
+//! 8-wide nodes, leaves of 4 triangles, its own Möller-Trumbore test with an approximate
+//! reciprocal), built by its `Build`, one call per ray in a C++ loop (no FFI call per ray). tinybvh
+//! normalises directions, so a finite `tmax` is scaled by the direction's length.
+//!
+//! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree, `tinybvh` for
+//! tinybvh: `bash benches/peers/tinybvh_fetch.sh` first, and export the `TINYBVH_DIR` it prints). With
 //! `STRAHL_SHADOW_SPLIT=1` the shadow rays also run as two more kinds, `shadow_blocked` and
 //! `shadow_free` (split by the BVH8's answer).
 
@@ -415,6 +422,10 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
         false,
         Some(peers::embree::keep_finite_t),
     );
+    // tinybvh's fastest CPU single-ray layout (BVH8_CPU: 8-wide nodes, leaves of 4 triangles),
+    // built by its `Build` (binned SAH).
+    #[cfg(feature = "tinybvh")]
+    let tinybvh = peers::tinybvh::Bvh8::new(&c.tris, false);
 
     for (kind, rays, any_hit) in &kinds {
         let members: Vec<(&str, Run)> = if *any_hit {
@@ -493,6 +504,28 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
         g.throughput(Throughput::Elements(rays.len() as u64));
         for (m, f) in &members {
             g.bench_function(*m, |bch| bch.iter(|| f(black_box(&c), black_box(rays))));
+        }
+        #[cfg(feature = "tinybvh")]
+        {
+            let t = &tinybvh;
+            let count = |rays: &[Ray]| {
+                if *any_hit {
+                    t.occluded_count(rays)
+                } else {
+                    t.intersect_count(rays)
+                }
+            };
+            let got = count(rays);
+            assert!(
+                got.abs_diff(reference) <= rays.len() / 1000 + 1,
+                "{name}/{kind}: tinybvh hits {got}, bvh2 {reference}"
+            );
+            let label = if *any_hit {
+                "tinybvh_bvh8_cpu_IsOccluded"
+            } else {
+                "tinybvh_bvh8_cpu_Intersect"
+            };
+            g.bench_function(label, |bch| bch.iter(|| count(black_box(rays))));
         }
         #[cfg(feature = "embree")]
         {

@@ -3,3 +3,5 @@
 
 #[cfg(feature = "embree")]
 pub mod embree;
+#[cfg(feature = "tinybvh")]
+pub mod tinybvh;
