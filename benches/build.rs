@@ -53,7 +53,11 @@
 //!   `TINYBVH_DIR`): tinybvh 1.6.8 (Jacco Bikker's single-header C++ library), compiled with
 //!   `-O3 -march=native` and `NO_THREADED_BUILDS`: `Build` (binned SAH, 8 bins on three axes
 //!   over the node's box, the SAH leaf rule with `C_T = C_I = 1`) and `BuildAVX` (the same with
-//!   AVX binning). Its input is a vertex array (three 16-byte vertices per triangle), converted
+//!   AVX binning), and `BuildHQ` (its SBVH: binned SAH with spatial splits, checked with
+//!   `validate_split`, both parts of a triangle in one leaf kept once in the converted tree, as
+//!   for Embree's; its clipping rounds to nearest, not outwards, so its leaf boxes miss slivers
+//!   of split triangles by fractions of an ulp or more: the converted boxes are widened by the
+//!   fewest of 1, 2, 4, ..., 64 ulps that passes, which the summary prints). Its input is a vertex array (three 16-byte vertices per triangle), converted
 //!   untimed; the triangles' boxes are computed inside its timed build. Warm: one `BVH` object
 //!   rebuilt; cold: a new one per build.
 //!
@@ -288,6 +292,24 @@ trait Peer {
     /// `validate_split`).
     fn split(&self) -> bool {
         false
+    }
+    /// Whether its spatial-split leaf boxes may miss slivers of split triangles by rounding (its
+    /// clipping rounds to nearest, not outwards): the converted boxes are then widened by the
+    /// fewest of 1, 2, 4, ..., 64 ulps that passes `validate_split`, and that count printed.
+    fn widen_split_boxes(&self) -> bool {
+        false
+    }
+}
+
+/// Every box of `bvh` moved `ulps` floats outwards (nested boxes stay nested).
+fn widen_boxes(bvh: &mut Bvh2, ulps: u32) {
+    for n in &mut bvh.nodes {
+        for k in 0..3 {
+            for _ in 0..ulps {
+                n.min[k] = n.min[k].next_down();
+                n.max[k] = n.max[k].next_up();
+            }
+        }
     }
 }
 
@@ -615,6 +637,8 @@ impl Peer for EmbreePeer<'_> {
 struct TinybvhPeer {
     builder: peers::tinybvh::Builder,
     label: &'static str,
+    /// `BuildHQ`: spatial splits (a triangle may sit in several leaves).
+    split: bool,
     tris: Vec<Triangle>,
     cold_out: Option<peers::tinybvh::Bvh>,
     warm_out: peers::tinybvh::Bvh,
@@ -626,6 +650,7 @@ impl TinybvhPeer {
         Self {
             builder,
             label,
+            split: matches!(builder, peers::tinybvh::Builder::BuildHq),
             tris: tris.to_vec(),
             cold_out: None,
             warm_out: peers::tinybvh::Bvh::new(tris),
@@ -650,20 +675,33 @@ impl Peer for TinybvhPeer {
         let (_, t) = timed(|| self.warm_out.build(self.builder));
         Some(t)
     }
+    fn split(&self) -> bool {
+        self.split
+    }
     fn tree(&self) -> Bvh2 {
         let bvh = self.cold_out.as_ref().unwrap_or(&self.warm_out);
         let (nodes, prim_idx) = bvh.tree();
         let root = nodes.first().map(|n| (n.aabb(), 0usize));
+        let split = self.split;
         convert(root, |i, prims| {
             let n = &nodes[i];
             let first = n.index as usize;
             if n.count > 0 {
-                prims.extend_from_slice(&prim_idx[first..first + n.count as usize]);
+                let start = prims.len();
+                for &id in &prim_idx[first..first + n.count as usize] {
+                    // As for Embree's splits: both parts of a triangle in one leaf kept once.
+                    if !(split && prims[start..].contains(&id)) {
+                        prims.push(id);
+                    }
+                }
                 None
             } else {
                 Some([(nodes[first].aabb(), first), (nodes[first + 1].aabb(), first + 1)])
             }
         })
+    }
+    fn widen_split_boxes(&self) -> bool {
+        self.split
     }
 }
 
@@ -688,7 +726,7 @@ fn peers_for<'d>(s: &Scene, #[cfg(feature = "embree")] device: &'d peers::embree
     #[cfg(feature = "tinybvh")]
     {
         use peers::tinybvh::Builder as B;
-        for (label, b) in [("Build", B::Build), ("BuildAVX", B::BuildAvx)] {
+        for (label, b) in [("Build", B::Build), ("BuildAVX", B::BuildAvx), ("BuildHQ", B::BuildHq)] {
             v.push(Box::new(TinybvhPeer::new(&s.tris, label, b)));
         }
     }
@@ -874,15 +912,22 @@ fn summary(s: &Scene, peers: &mut [Box<dyn Peer + '_>], fastest: &Fastest) -> Ve
             .warm()
             .map(|first| best_time(first, get(&name, true), || p.warm().expect("warm")));
         let cold = best_time(p.cold(), get(&name, false), || p.cold());
-        rows.push(measure(
-            s,
-            name.clone(),
-            family_of(&name),
-            warm,
-            cold,
-            &p.tree(),
-            p.split(),
-        ));
+        let mut tree = p.tree();
+        if p.widen_split_boxes() && tree.validate_split(&s.tris[..]).is_err() {
+            let mut done = 0;
+            for ulps in [1, 2, 4, 8, 16, 32, 64] {
+                widen_boxes(&mut tree, ulps - done);
+                done = ulps;
+                if tree.validate_split(&s.tris[..]).is_ok() {
+                    break;
+                }
+            }
+            println!(
+                "{}: {name}: leaf boxes missed slivers of split triangles; widened by {done} ulps",
+                s.name
+            );
+        }
+        rows.push(measure(s, name.clone(), family_of(&name), warm, cold, &tree, p.split()));
     }
     let n = s.tris.len() as f64;
     let reference = rows[0].hits;
