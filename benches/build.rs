@@ -57,9 +57,10 @@
 //!   `validate_split`, both parts of a triangle in one leaf kept once in the converted tree, as
 //!   for Embree's; its clipping rounds to nearest, not outwards, so its leaf boxes miss slivers
 //!   of split triangles by fractions of an ulp or more: the converted boxes are widened by the
-//!   fewest of 1, 2, 4, ..., 64 ulps that passes, which the summary prints). Its input is a vertex array (three 16-byte vertices per triangle), converted
-//!   untimed; the triangles' boxes are computed inside its timed build. Warm: one `BVH` object
-//!   rebuilt; cold: a new one per build.
+//!   fewest of 1, 2, 4, ..., 64 ulps that passes, which the summary prints). Its input is a
+//!   vertex array (three 16-byte vertices per triangle), converted untimed; the triangles' boxes
+//!   are computed inside its timed build. Warm: one `BVH` object rebuilt; cold: a new one per
+//!   build.
 //!
 //! Every peer's build time includes computing the triangles' boxes, as strahl's does. Each peer's
 //! tree is then converted (untimed) to a strahl `Bvh2`, depth first with siblings adjacent and the

@@ -29,9 +29,9 @@
 //! normalises directions, so a finite `tmax` is scaled by the direction's length.
 //!
 //! `cargo bench --bench trace -- --noplot` (add `--features embree` for Embree, `tinybvh` for
-//! tinybvh: `bash benches/peers/tinybvh_fetch.sh` first, and export the `TINYBVH_DIR` it prints). With
-//! `STRAHL_SHADOW_SPLIT=1` the shadow rays also run as two more kinds, `shadow_blocked` and
-//! `shadow_free` (split by the BVH8's answer).
+//! tinybvh: `bash benches/peers/tinybvh_fetch.sh` first, and export the `TINYBVH_DIR` it
+//! prints). With `STRAHL_SHADOW_SPLIT=1` the shadow rays also run as two more kinds,
+//! `shadow_blocked` and `shadow_free` (split by the BVH8's answer).
 
 #[path = "common/mod.rs"]
 mod common;
