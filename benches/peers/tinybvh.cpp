@@ -35,16 +35,13 @@ void strahl_tb_bvh_free(void* b) { delete static_cast<BVH*>(b); }
 
 // Builds over `n` triangles given as 3n vertices of four floats (16-byte aligned; tinybvh keeps
 // a pointer to them). mode 0: `Build` (binned SAH, 8 bins), 1: `BuildAVX` (the same with AVX
-// binning), 2: `BuildHQ` (spatial splits). Writes the node count; returns the SAH cost with
-// C_T = C_I = 1, relative to the root's area (the definition of strahl's `Bvh2::sah_cost`).
-float strahl_tb_bvh_build(void* b, const float* verts, uint32_t n, int mode, uint32_t* nodes) {
+// binning), 2: `BuildHQ` (spatial splits). Only the build: the bench measures the tree itself.
+void strahl_tb_bvh_build(void* b, const float* verts, uint32_t n, int mode) {
     BVH* bvh = static_cast<BVH*>(b);
     const bvhvec4* v = reinterpret_cast<const bvhvec4*>(verts);
     if (mode == 1) bvh->BuildAVX(v, n);
     else if (mode == 2) bvh->BuildHQ(v, n);
     else bvh->Build(v, n);
-    *nodes = bvh->usedNodes;
-    return bvh->SAHCost();
 }
 
 // The last build's nodes (32 bytes each: min, left child or first primitive, max, primitive

@@ -12,7 +12,7 @@ use strahl::geometry::Triangle;
 unsafe extern "C" {
     fn strahl_tb_bvh_new() -> *mut c_void;
     fn strahl_tb_bvh_free(b: *mut c_void);
-    fn strahl_tb_bvh_build(b: *mut c_void, verts: *const f32, n: u32, mode: i32, nodes: *mut u32) -> f32;
+    fn strahl_tb_bvh_build(b: *mut c_void, verts: *const f32, n: u32, mode: i32);
     fn strahl_tb_bvh_nodes(b: *const c_void, count: *mut u32) -> *const c_void;
     fn strahl_tb_bvh_prims(b: *const c_void, count: *mut u32) -> *const u32;
     fn strahl_tb_bvh8_new(verts: *const f32, n: u32, hq: i32) -> *mut c_void;
@@ -58,22 +58,18 @@ impl Bvh {
         }
     }
 
-    /// Builds with `builder`; returns the SAH cost (C_T = C_I = 1, relative to the root's area)
-    /// and the node count.
-    pub fn build(&mut self, builder: Builder) -> (f32, u32) {
-        let mut nodes = 0;
+    /// Builds with `builder` (the build alone: the benches measure the tree from [`tree`](Self::tree)).
+    pub fn build(&mut self, builder: Builder) {
         // SAFETY: `raw` is live; `verts` holds 3 aligned vertices per triangle and outlives the
-        // tree (tinybvh keeps a pointer to it); `nodes` is a valid out pointer.
-        let sah = unsafe {
+        // tree (tinybvh keeps a pointer to it).
+        unsafe {
             strahl_tb_bvh_build(
                 self.raw,
                 self.verts.as_ptr().cast(),
                 (self.verts.len() / 3) as u32,
                 builder as i32,
-                &mut nodes,
             )
-        };
-        (sah, nodes)
+        }
     }
 
     /// The last build's nodes (tinybvh's `BVHNode` has strahl's `Node` layout: min, left child
