@@ -308,7 +308,7 @@ fn terrain_and_sphereflake() {
 fn extended_morton_cells_build_better_trees_on_flat_scenes() {
     // A terrain 1 x 1 wide and about 0.2 high (the centroid bounds are about 5:1): near-cubic
     // Morton cells halve the LBVH's and PLOC's SAH cost above the full sweep's at 1M triangles
-    // (README); here, at 32k triangles, each Morton builder's tree must be clearly better than
+    // (`benches/RESULTS.md`); here, at 32k triangles, each Morton builder's tree must be clearly better than
     // on the per-axis grid.
     let flat = scene::terrain(128, 1).to_soup();
     let soup = scene::thin_soup(20_000, 3);
@@ -977,7 +977,7 @@ fn hybrid_sah_is_near_the_full_sweep_and_beats_fast() {
 #[test]
 fn high_beats_the_full_sweep() {
     // Binned SAH with 64 bins and one round of rotations: 0.05% to 2.5% below the full sweep's
-    // SAH cost at 1M triangles (README); here on smaller scenes of each kind, where it was found
+    // SAH cost at 1M triangles (`benches/RESULTS.md`); here on smaller scenes of each kind, where it was found
     // from 1.2% below to 0.14% above (the 10k-triangle terrain), hence the margin of 0.2%. The
     // rotations never raise the cost of the tree they start from (the same build without them).
     let scenes = [

@@ -26,7 +26,7 @@
 //!    them with their like from other cells.
 //!
 //! PERF (1M-triangle scenes, one thread, best of 3, taking turns with the unpruned build; the
-//! README's builder section has the table): the sphereflake's SAH cost from 10.7% above the full
+//! journal's builder section, benches/RESULTS.md, has the table): the sphereflake's SAH cost from 10.7% above the full
 //! sweep's to 0.2% above it, at 140 -> 157 ms; the terrain's from 7.6% to 4.5% above, at
 //! 128 -> 144 ms; the soup and the bunny (no cluster stands out) unchanged.
 //!

@@ -129,7 +129,7 @@
 //! ([`min_prims`](TreeletParams::min_prims)), or to improve a tree that is kept.
 //!
 //! **Agglomerative treelets** (ATRBVH, [`Refine::AgglomerativeTreelets`], fifteenth session,
-//! Intel Xeon, warm builder, best of 3; README "Agglomerative treelets" has the criterion run):
+//! Intel Xeon, warm builder, best of 3; `benches/RESULTS.md` has the criterion run):
 //! the same treelets, each rebuilt by merging the two clusters of least union area until one is
 //! left (Domingues and Pedrini 2015), so 9 to 16 leaves cost less than the exact search's 7. After
 //! the LBVH of the 1M soup / sphereflake: treelets of 7, one round, 316 / 322 ms to SAH 502.8 /

@@ -322,7 +322,7 @@ pub struct WithBoxes<T, const CONSERVATIVE: bool>(core::marker::PhantomData<T>);
 /// [`PreparedRay::with_fast_inv`]): meant for directions of ordinary length; one scaled down to
 /// `1e-17` or less can miss boxes it crosses. Every answer it gives is still a real hit (never closer than the
 /// true closest one; an occlusion it reports is real): it only misses. Measured on the trace
-/// bench (README): 4 to 12% faster on primary, diffuse and shadow rays, BVH8, both scenes; on
+/// bench (`benches/RESULTS.md`): 4 to 12% faster on primary, diffuse and shadow rays, BVH8, both scenes; on
 /// rays aimed at a closed mesh's edges and vertices, 20 of 20,496 fall through with the
 /// watertight test where none do with the conservative one. Ray packets keep the conservative
 /// test whatever the type (they trace `Fast<T>` as `T`).

@@ -20,7 +20,7 @@
 //! generated tile by tile, are coherent as they come and gain nothing.
 //!
 //! PERF (`cargo bench --features embree --bench trace -- --noplot`, 262,144 rays, BVH8, the
-//! sort's time included): see the README's trace section.
+//! sort's time included): see the trace section of `benches/RESULTS.md`.
 //!
 //! ```
 //! use strahl::{Ray, Vec3, traverse::order::RayOrder};

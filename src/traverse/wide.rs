@@ -20,8 +20,8 @@ const STACK: usize = MAX_WIDE_DEPTH as usize * 7 + 1;
 /// Asks the cache for child `code` (an interior node, or the first 384 bytes of a leaf's packs)
 /// ahead of its visit: children pushed now are popped after their siblings' subtrees, by when the
 /// lines have arrived. A hint only (no read happens; x86 only, a no-op elsewhere).
-// PERF: measured on the 1M sphereflake (BVH8, 262k rays, best of 5): see the README's trace
-// section. Trees that fit in the cache gain nothing and lose nothing measurable.
+// PERF: measured on the 1M sphereflake (BVH8, 262k rays, best of 5): see the trace section of
+// benches/RESULTS.md. Trees that fit in the cache gain nothing and lose nothing measurable.
 #[inline(always)]
 pub(crate) fn prefetch<L, const N: usize>(bvh: BvhWideRef<'_, L, N>, code: u32) {
     #[cfg(target_arch = "x86_64")]
