@@ -13,6 +13,13 @@
 //! `RTC_GEOMETRY_TYPE_INSTANCE` geometries over one mesh scene, `embree_instances`) and the
 //! flattened scene (`embree_flat`), `rtcIntersect1` / `rtcOccluded1`, default (non-robust) mode.
 //!
+//! Masks (`*_masked`): half the instances, drawn at random, carry mask `0b10` (say, casting no
+//! shadow), the rest `0b11`, and the rays trace with mask `0b01`, so they see half the scene:
+//! `Tlas::intersect_masked` / `occluded_masked` against Embree's geometry masks
+//! (`rtcSetGeometryMask`, `RTCRay::mask`) and against the same visibility as a hit filter
+//! (`tlas_bvh8_filter_mask`: `intersect_filtered` rejecting the hits of hidden instances, which
+//! still walks their BLASes). Their hit counts are checked against each other first.
+//!
 //! `cargo bench --bench instance -- --noplot` (add `--features embree` for Embree)
 
 #[path = "common/mod.rs"]
@@ -26,7 +33,7 @@ use glam::{Affine3A, Quat};
 use std::hint::black_box;
 use strahl::build::{BuildParams, Bvh2};
 use strahl::geometry::Triangle;
-use strahl::layout::{Bvh8, Instance, Tlas};
+use strahl::layout::{Bvh8, Instance, InstanceHit, Tlas};
 use strahl::scene::{self, Rng};
 use strahl::traverse::Moller;
 use strahl::traverse::packet::TileShape;
@@ -62,6 +69,15 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
     let (inst, world) = grid(&mesh, k, 3);
     let blases = [build_bvh8(&mesh)];
     let tlas = Tlas::build(&inst, &blases).unwrap();
+    // Half the instances hidden from rays of mask 0b01 (see the module docs).
+    let masks: Vec<u32> = {
+        let mut rng = Rng::new(17);
+        inst.iter().map(|_| if rng.f32() < 0.5 { 0b10 } else { 0b11 }).collect()
+    };
+    let masked_inst: Vec<Instance> = inst.iter().zip(&masks).map(|(i, &m)| i.with_mask(m)).collect();
+    let masked = Tlas::build(&masked_inst, &blases).unwrap();
+    const RAY_MASK: u32 = 0b01;
+    let visible = |h: &InstanceHit| masks[h.instance as usize] & RAY_MASK != 0;
     let flat = build_bvh8(&world);
     eprintln!(
         "{name}: {} instances, {} world triangles; memory: flat BVH8 {:.1} MB, BLAS {:.2} MB + TLAS {:.3} MB",
@@ -92,6 +108,7 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
             device,
             InstanceScene::new(device, &mesh, &xfms, Quality::Medium),
             Scene::new(device, &world, Quality::Medium),
+            InstanceScene::with_masks(device, &mesh, &xfms, &masks, Quality::Medium),
         )
     };
     let b = bounds(&world);
@@ -140,9 +157,43 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
                     .count()
             })
         });
+        let n_masked = rays
+            .iter()
+            .filter(|r| masked.intersect_masked::<Moller, _, 8>(&blases, r, RAY_MASK).is_some())
+            .count();
+        let n_filter = rays
+            .iter()
+            .filter(|r| tlas.intersect_filtered::<Moller, _, 8>(&blases, r, visible).is_some())
+            .count();
+        assert_eq!(n_masked, n_filter, "{name}/{kind}: masks against the filter");
+        assert!(n_masked < n_tlas, "{name}/{kind}: the masks hide nothing");
+        g.bench_function("tlas_bvh8_masked", |bch| {
+            bch.iter(|| {
+                black_box(rays)
+                    .iter()
+                    .filter(|r| masked.intersect_masked::<Moller, _, 8>(&blases, r, RAY_MASK).is_some())
+                    .count()
+            })
+        });
+        g.bench_function("tlas_bvh8_filter_mask", |bch| {
+            bch.iter(|| {
+                black_box(rays)
+                    .iter()
+                    .filter(|r| tlas.intersect_filtered::<Moller, _, 8>(&blases, r, visible).is_some())
+                    .count()
+            })
+        });
+        g.bench_function("tlas_bvh8_occluded_masked", |bch| {
+            bch.iter(|| {
+                black_box(rays)
+                    .iter()
+                    .filter(|r| masked.occluded_masked::<Moller, _, 8>(&blases, r, RAY_MASK))
+                    .count()
+            })
+        });
         #[cfg(feature = "embree")]
         {
-            let (ei, ef) = (&embree.1, &embree.2);
+            let (ei, ef, em) = (&embree.1, &embree.2, &embree.3);
             let n_embree = rays.iter().filter(|r| ei.intersect1(r).is_some()).count();
             assert!(
                 n_embree.abs_diff(n_tlas) * 1000 <= rays.len(),
@@ -159,6 +210,30 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
             });
             g.bench_function("embree_instances_occluded", |bch| {
                 bch.iter(|| black_box(rays).iter().filter(|r| ei.occluded1(r)).count())
+            });
+            let n_em = rays
+                .iter()
+                .filter(|r| em.intersect1_masked(r, RAY_MASK).is_some())
+                .count();
+            assert!(
+                n_em.abs_diff(n_masked) * 1000 <= rays.len(),
+                "{name}/{kind}: Embree masked {n_em} vs {n_masked} hits"
+            );
+            g.bench_function("embree_instances_masked", |bch| {
+                bch.iter(|| {
+                    black_box(rays)
+                        .iter()
+                        .filter(|r| em.intersect1_masked(r, RAY_MASK).is_some())
+                        .count()
+                })
+            });
+            g.bench_function("embree_instances_occluded_masked", |bch| {
+                bch.iter(|| {
+                    black_box(rays)
+                        .iter()
+                        .filter(|r| em.occluded1_masked(r, RAY_MASK))
+                        .count()
+                })
             });
         }
         g.finish();

@@ -511,3 +511,88 @@ fn one_triangle_blas_and_one_instance() {
     assert!(tlas.occluded::<Watertight, _, 8>(&b8, &Ray::with_range(o, target - o, 0.0, 1.01)));
     assert!(!tlas.occluded::<Watertight, _, 8>(&b8, &Ray::with_range(o, target - o, 0.0, 0.99)));
 }
+
+#[test]
+fn masks_hide_instances_as_brute_force_over_the_visible_ones() {
+    // Instances of random masks (some 0, some grouped by region so that whole TLAS subtrees are
+    // hidden at once), rays of several masks: the masked traversals give the closest and any hit
+    // of brute force over the instances whose mask shares a bit with the ray's, BVH8 and BVH4
+    // BLASes; `set_mask` answers as a build with the new masks.
+    let meshes = meshes();
+    let spread = 30.0;
+    let base = instances(80, meshes.len() as u32, spread, 41);
+    let mut rng = Rng::new(42);
+    let inst: Vec<Instance> = base
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            let m = match i % 5 {
+                0 => 0,
+                // By region: the half of the cube below x = spread / 2 hidden from bit 2.
+                1 | 2 => {
+                    if x.transform.translation.x < spread / 2.0 {
+                        0b011
+                    } else {
+                        0b111
+                    }
+                }
+                _ => (rng.u64() % 8) as u32,
+            };
+            x.with_mask(m)
+        })
+        .collect();
+    let rays = rays(400, &inst, spread, 43);
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let b4 = blases::<strahl::math::f32x4, 4>(&meshes);
+    let tlas8 = Tlas::build(&inst, &b8).unwrap();
+    let tlas4 = Tlas::build(&inst, &b4).unwrap();
+    assert_eq!(tlas8.mask(0), Some(0));
+    let mut hidden = 0;
+    for ray_mask in [u32::MAX, 0b001, 0b010, 0b100, 0b110, 0] {
+        let sees = |h: &InstanceHit| inst[h.instance as usize].mask & ray_mask != 0;
+        for ray in &rays {
+            let want = reference_filtered::<Moller>(&meshes, &inst, None, ray, &sees);
+            let what = format!("ray mask {ray_mask:#b}");
+            let got8 = tlas8.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask);
+            let got4 = tlas4.intersect_masked::<Moller, _, 4>(&b4, ray, ray_mask);
+            same_filtered::<Moller>(got8, want, &meshes, &inst, ray, &what, &sees);
+            same_filtered::<Moller>(got4, want, &meshes, &inst, ray, &what, &sees);
+            assert_eq!(
+                tlas8.occluded_masked::<Moller, _, 8>(&b8, ray, ray_mask),
+                want.is_some(),
+                "{what}"
+            );
+            assert_eq!(
+                tlas4.occluded_masked::<Moller, _, 4>(&b4, ray, ray_mask),
+                want.is_some(),
+                "{what}"
+            );
+            if ray_mask == u32::MAX {
+                // The unmasked calls trace with all ones: instances of mask 0 stay hidden.
+                assert_eq!(tlas8.intersect::<Moller, _, 8>(&b8, ray), got8);
+                assert_eq!(tlas8.occluded::<Moller, _, 8>(&b8, ray), want.is_some());
+            }
+            let all = reference::<Moller>(&meshes, &inst, ray);
+            hidden += usize::from(all.is_some() && all != want);
+        }
+    }
+    // The masks changed answers, or the comparison says little.
+    assert!(hidden > 200, "the masks changed {hidden} answers");
+    // `set_mask`: every instance's mask changed in place answers as a fresh build.
+    let mut changed = tlas8.clone();
+    let mut rebuilt = inst.clone();
+    for (i, x) in rebuilt.iter_mut().enumerate() {
+        x.mask = (x.mask + i as u32) % 4;
+        assert!(changed.set_mask(i, x.mask));
+    }
+    assert!(!changed.set_mask(inst.len(), 1));
+    let fresh = Tlas::build(&rebuilt, &b8).unwrap();
+    for ray in &rays {
+        for ray_mask in [0b01, 0b10, u32::MAX] {
+            assert_eq!(
+                changed.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask),
+                fresh.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask)
+            );
+        }
+    }
+}

@@ -243,6 +243,7 @@ unsafe extern "C" {
     fn rtcUpdateGeometryBuffer(geometry: RTCGeometry, ty: c_uint, slot: c_uint);
     fn rtcSetGeometryInstancedScene(geometry: RTCGeometry, scene: RTCScene);
     fn rtcSetGeometryTransform(geometry: RTCGeometry, time_step: c_uint, format: c_uint, xfm: *const c_void);
+    fn rtcSetGeometryMask(geometry: RTCGeometry, mask: c_uint);
     fn rtcIntersect1(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
     fn rtcOccluded1(scene: RTCScene, ctx: *mut RTCIntersectContext, ray: *mut RTCRay);
     fn rtcIntersect1M(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit, m: c_uint, stride: usize);
@@ -401,13 +402,13 @@ impl<'d> Scene<'d> {
     /// Closest hit: `(t, primitive)`.
     #[inline]
     pub fn intersect1(&self, r: &Ray) -> Option<(f32, u32)> {
-        intersect1(self.scene, r)
+        intersect1(self.scene, r, u32::MAX)
     }
 
     /// Any hit in `[tmin, tmax]`.
     #[inline]
     pub fn occluded1(&self, r: &Ray) -> bool {
-        occluded1(self.scene, r)
+        occluded1(self.scene, r, u32::MAX)
     }
 
     /// Embree's stream API over a batch (`rtcIntersect1M`, as many rays per call as
@@ -524,6 +525,19 @@ pub struct InstanceScene<'d> {
 impl<'d> InstanceScene<'d> {
     /// Builds the BLAS over `tris` and the top scene over `transforms`, both at `quality`.
     pub fn new(device: &'d Device, tris: &[[Vec3; 3]], transforms: &[[f32; 12]], quality: Quality) -> Self {
+        Self::with_masks(device, tris, transforms, &[], quality)
+    }
+
+    /// [`new`](Self::new) with a geometry mask per instance (`rtcSetGeometryMask`; instances
+    /// past `masks` keep Embree's default, all ones), for [`intersect1_masked`](Self::intersect1_masked).
+    /// The device must support ray masks (Debian's Embree 3 does: `RTC_DEVICE_PROPERTY_RAY_MASK_SUPPORTED`).
+    pub fn with_masks(
+        device: &'d Device,
+        tris: &[[Vec3; 3]],
+        transforms: &[[f32; 12]],
+        masks: &[u32],
+        quality: Quality,
+    ) -> Self {
         let blas = Scene::new(device, tris, quality);
         // SAFETY: standard Embree instance setup on a live device: the instanced scene is
         // committed (by `Scene::new`) and outlives the top scene (kept in `_blas`, dropped after
@@ -531,10 +545,13 @@ impl<'d> InstanceScene<'d> {
         unsafe {
             let scene = rtcNewScene(device.0);
             rtcSetSceneBuildQuality(scene, quality as c_uint);
-            for xfm in transforms {
+            for (i, xfm) in transforms.iter().enumerate() {
                 let g = rtcNewGeometry(device.0, RTC_GEOMETRY_TYPE_INSTANCE);
                 rtcSetGeometryInstancedScene(g, blas.scene);
                 rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, xfm.as_ptr().cast());
+                if let Some(&m) = masks.get(i) {
+                    rtcSetGeometryMask(g, m);
+                }
                 rtcCommitGeometry(g);
                 rtcAttachGeometry(scene, g);
                 rtcReleaseGeometry(g);
@@ -548,13 +565,25 @@ impl<'d> InstanceScene<'d> {
     /// Closest hit: `(t, primitive)`.
     #[inline]
     pub fn intersect1(&self, r: &Ray) -> Option<(f32, u32)> {
-        intersect1(self.scene, r)
+        intersect1(self.scene, r, u32::MAX)
     }
 
     /// Any hit in `[tmin, tmax]`.
     #[inline]
     pub fn occluded1(&self, r: &Ray) -> bool {
-        occluded1(self.scene, r)
+        occluded1(self.scene, r, u32::MAX)
+    }
+
+    /// Closest hit among the instances whose mask shares a bit with `mask`: `(t, primitive)`.
+    #[inline]
+    pub fn intersect1_masked(&self, r: &Ray, mask: u32) -> Option<(f32, u32)> {
+        intersect1(self.scene, r, mask)
+    }
+
+    /// Any hit in `[tmin, tmax]` among the instances whose mask shares a bit with `mask`.
+    #[inline]
+    pub fn occluded1_masked(&self, r: &Ray, mask: u32) -> bool {
+        occluded1(self.scene, r, mask)
     }
 }
 
@@ -565,11 +594,12 @@ impl Drop for InstanceScene<'_> {
     }
 }
 
-/// `rtcIntersect1` on a committed scene: `(t, primitive)` of the closest hit.
+/// `rtcIntersect1` on a committed scene with ray mask `mask`: `(t, primitive)` of the closest
+/// hit.
 #[inline]
-fn intersect1(scene: RTCScene, r: &Ray) -> Option<(f32, u32)> {
+fn intersect1(scene: RTCScene, r: &Ray, mask: u32) -> Option<(f32, u32)> {
     let mut rh = RTCRayHit {
-        ray: Scene::ray(r),
+        ray: RTCRay { mask, ..Scene::ray(r) },
         hit: RTCHit {
             ng: [0.0; 3],
             u: 0.0,
@@ -586,10 +616,10 @@ fn intersect1(scene: RTCScene, r: &Ray) -> Option<(f32, u32)> {
     (rh.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((rh.ray.tfar, rh.hit.prim_id))
 }
 
-/// `rtcOccluded1` on a committed scene: any hit in `[tmin, tmax]`.
+/// `rtcOccluded1` on a committed scene with ray mask `mask`: any hit in `[tmin, tmax]`.
 #[inline]
-fn occluded1(scene: RTCScene, r: &Ray) -> bool {
-    let mut ray = Scene::ray(r);
+fn occluded1(scene: RTCScene, r: &Ray, mask: u32) -> bool {
+    let mut ray = RTCRay { mask, ..Scene::ray(r) };
     let mut ctx = context();
     // SAFETY: as in `intersect1`.
     unsafe { rtcOccluded1(scene, &mut ctx, &mut ray) };
@@ -688,7 +718,7 @@ impl<'d> RefitScene<'d> {
 
     /// Closest hit: `(t, primitive)`.
     pub fn intersect1(&self, r: &Ray) -> Option<(f32, u32)> {
-        intersect1(self.scene, r)
+        intersect1(self.scene, r, u32::MAX)
     }
 }
 

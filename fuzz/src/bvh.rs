@@ -208,11 +208,17 @@ pub fn check_bvh(case: &BvhCase) {
         let bytes = b8.to_bytes();
         let loaded = Bvh8::from_bytes(&bytes).expect("a saved tree loads");
         assert_eq!(loaded.to_bytes(), bytes, "{params:?}: bytes written again");
-        assert_eq!(Bvh4::from_bytes(&b4.to_bytes()).expect("a saved tree loads").depth(), b4.depth());
+        assert_eq!(
+            Bvh4::from_bytes(&b4.to_bytes()).expect("a saved tree loads").depth(),
+            b4.depth()
+        );
         let at = case.rays.len().wrapping_mul(2_654_435_761) % bytes.len();
         let mut damaged = bytes.clone();
         damaged[at] ^= 0x10;
-        assert!(Bvh8::from_bytes(&damaged).is_err(), "{params:?}: damaged byte {at} read");
+        assert!(
+            Bvh8::from_bytes(&damaged).is_err(),
+            "{params:?}: damaged byte {at} read"
+        );
         assert!(Bvh8::from_bytes(&bytes[..bytes.len() - 1]).is_err());
         let mut packet_hits = [None; 8];
         packet::intersect8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_hits, packet::DEFAULT_SWITCH);
@@ -357,7 +363,7 @@ pub fn check_bvh(case: &BvhCase) {
                 what("bvh8 fast occluded")
             );
             // A hit filter (even primitives only): the nearest accepted hit, and whether there is one.
-            let even = |h: &Hit| h.prim % 2 == 0;
+            let even = |h: &Hit| h.prim.is_multiple_of(2);
             let want_even = strahl::traverse::intersect_brute_force_filtered::<Watertight, _, _>(&kept[..], ray, even);
             agrees(
                 &kept,
@@ -482,7 +488,9 @@ fn check_spatial(case: &BvhCase, kept: &[Triangle], scene_tame: bool) {
 /// BLAS index out of range): the bad ones left out; every ray traced without panicking, with
 /// finite hits; on tame inputs, closest hits equal to the closest of one BVH8 trace per instance
 /// (the same `t`, or a tie, or a near tie whose hit is real, as [`agrees`] allows), any hits
-/// agreeing with them.
+/// agreeing with them. The good instances carry masks `0b01`, `0b10` and `0b11`: the masked
+/// traversals see only the instances that share a bit with the ray's mask (checked on every ray;
+/// on tame inputs against the traces of those instances alone).
 fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
     use strahl::glam::{Affine3A, Mat3};
     use strahl::layout::{Instance, Tlas};
@@ -495,7 +503,12 @@ fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
         )),
         Affine3A::from_scale(Vec3::new(-0.5, 0.5, 0.5)),
     ];
-    let mut inst: Vec<Instance> = good.iter().map(|&m| Instance::new(m, 0)).collect();
+    const MASKS: [u32; 3] = [0b01, 0b10, 0b11];
+    let mut inst: Vec<Instance> = good
+        .iter()
+        .zip(MASKS)
+        .map(|(&m, k)| Instance::new(m, 0).with_mask(k))
+        .collect();
     inst.push(Instance::new(Affine3A::from_translation(Vec3::NAN), 0));
     inst.push(Instance::new(Affine3A::IDENTITY, 1));
     let blases = core::slice::from_ref(b8);
@@ -529,6 +542,29 @@ fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
             );
             assert!(g.instance < 3, "tlas ray {i}: a bad instance hit: {g:?}");
         }
+        for ray_mask in [0b01, 0b10] {
+            let m = tlas.intersect_masked::<Watertight, _, 8>(blases, ray, ray_mask);
+            if let Some(h) = m {
+                assert!(
+                    h.instance < 3 && MASKS[h.instance as usize] & ray_mask != 0,
+                    "tlas ray {i}: {h:?} hidden"
+                );
+                assert!(
+                    got.is_some_and(|g| g.hit.t <= h.hit.t),
+                    "tlas ray {i}: masked {h:?} before {got:?}"
+                );
+            }
+            assert_eq!(
+                tlas.occluded_masked::<Watertight, _, 8>(blases, ray, ray_mask),
+                m.is_some(),
+                "tlas ray {i}: masked occluded"
+            );
+        }
+        assert_eq!(
+            tlas.intersect_masked::<Watertight, _, 8>(blases, ray, u32::MAX),
+            got,
+            "tlas ray {i}: all ones"
+        );
         let tame = |v: Vec3| {
             v.to_array()
                 .iter()
@@ -566,6 +602,28 @@ fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
                 }
             }
             _ => panic!("tlas ray {i}: {got:?} against {want:?}"),
+        }
+        // Masked: the closest of the visible instances' traces (the same t; the instance may
+        // differ on a tie).
+        for ray_mask in [0b01, 0b10] {
+            let want = good
+                .iter()
+                .enumerate()
+                .filter(|&(k, _)| MASKS[k] & ray_mask != 0)
+                .filter_map(|(k, m)| b8.intersect::<Watertight>(&local(m, ray)).map(|h| (k, h)))
+                .fold(None::<(usize, Hit)>, |b, (k, h)| match b {
+                    Some((_, bh)) if bh.t <= h.t => b,
+                    _ => Some((k, h)),
+                });
+            let got = tlas.intersect_masked::<Watertight, _, 8>(blases, ray, ray_mask);
+            match (got, want) {
+                (None, None) => {}
+                (Some(g), Some((_, w))) => assert!(
+                    g.hit.t == w.t || near_tie(ray, g.hit, w),
+                    "tlas ray {i} mask {ray_mask}: {g:?} against {w:?}"
+                ),
+                _ => panic!("tlas ray {i} mask {ray_mask}: {got:?} against {want:?}"),
+            }
         }
     }
 }

@@ -11,14 +11,15 @@ use alloc::vec;
 use alloc::vec::Vec;
 use glam::{Affine3A, Vec3, Vec3A};
 
-/// One placement of a bottom-level tree: its object-to-world transform and which tree (an index
-/// into the slice of BLASes given to [`Tlas::build`] and to the traversals).
+/// One placement of a bottom-level tree: its object-to-world transform, which tree (an index
+/// into the slice of BLASes given to [`Tlas::build`] and to the traversals) and its visibility
+/// mask.
 ///
 /// ```
 /// use strahl::{Vec3, layout::Instance};
 /// use strahl::glam::Affine3A;
 /// let i = Instance::new(Affine3A::from_translation(Vec3::X), 3);
-/// assert_eq!((i.blas, i.transform.translation.x), (3, 1.0));
+/// assert_eq!((i.blas, i.transform.translation.x, i.mask), (3, 1.0, u32::MAX));
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Instance {
@@ -26,6 +27,11 @@ pub struct Instance {
     pub transform: Affine3A,
     /// Index of the instance's BLAS.
     pub blas: u32,
+    /// Visibility mask: the masked traversals ([`Tlas::intersect_masked`],
+    /// [`Tlas::occluded_masked`]) see the instance only where `mask & ray_mask != 0`, as
+    /// Embree's geometry masks and DXR's instance masks work. The other traversals trace with a
+    /// ray mask of all ones, so an instance of mask `0` is hidden from every ray.
+    pub mask: u32,
 }
 
 impl Instance {
@@ -37,7 +43,24 @@ impl Instance {
     /// assert_eq!(i.blas, 0);
     /// ```
     pub const fn new(transform: Affine3A, blas: u32) -> Self {
-        Self { transform, blas }
+        Self {
+            transform,
+            blas,
+            mask: u32::MAX,
+        }
+    }
+
+    /// The instance with visibility mask `mask` (see [`mask`](Self::mask)).
+    ///
+    /// ```
+    /// use strahl::layout::Instance;
+    /// // Seen by camera rays (bit 0), not by shadow rays (bit 1).
+    /// let i = Instance::new(strahl::glam::Affine3A::IDENTITY, 0).with_mask(0b01);
+    /// assert_eq!(i.mask, 1);
+    /// ```
+    #[must_use]
+    pub const fn with_mask(self, mask: u32) -> Self {
+        Self { mask, ..self }
     }
 }
 
@@ -97,6 +120,12 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 ///   [`Tlas::left_out`]. Rays follow the crate's policy (NaN, infinite or
 ///   zero-direction rays hit nothing); an object-space ray that its transform makes invalid (a
 ///   direction flushed to zero) hits nothing in that instance.
+/// - **Masks** ([`Instance::mask`], Embree's geometry masks, DXR's instance masks):
+///   [`intersect_masked`](Tlas::intersect_masked) and [`occluded_masked`](Tlas::occluded_masked)
+///   take a ray mask and see only the instances with `mask & ray_mask != 0`, for objects hidden
+///   from the camera or casting no shadow. Each node slot holds the union (bitwise or) of the
+///   masks below it, so a subtree no instance of which the ray can see is skipped whole, without
+///   its boxes tested. [`set_mask`](Tlas::set_mask) changes an instance's mask without a rebuild.
 /// - **Ties**: where two instances are hit at exactly the same `t`, the one found first wins
 ///   (the TLAS's near-to-far order); within one BLAS, the wide traversal's rule.
 /// - **Accuracy**: hits are those of a trace of the object-space ray through each instance's BLAS
@@ -153,19 +182,47 @@ pub struct Tlas {
     inverse: Vec<Affine3A>,
     /// BLAS index per instance.
     blas: Vec<u32>,
+    /// Visibility mask per instance ([`Instance::mask`]).
+    masks: Vec<u32>,
     left_out: u32,
 }
 
 /// A 4-wide TLAS node: child boxes in SoA lanes; child codes a node index, [`LEAF_BIT`] with an
-/// instance index, or [`EMPTY_CHILD`] (its box empty, so never hit).
+/// instance index, or [`EMPTY_CHILD`] (its box empty, so never hit); per child the union of the
+/// masks of the instances below it (`0` for an empty slot). Two cache lines.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(16))]
+#[repr(C, align(64))]
 struct TlasNode {
     bounds: AabbLanes<f32x4>,
     child: [u32; 4],
+    mask: [u32; 4],
 }
 
-const _: () = assert!(core::mem::size_of::<TlasNode>() == 112);
+const _: () = assert!(core::mem::size_of::<TlasNode>() == 128);
+
+/// Fills every slot's [`TlasNode::mask`] from `masks` (per instance): the children of a node lie
+/// after it ([`collapse`] pushes them after their parent), so one pass from the last node to the
+/// first sees every child's masks before its parent's.
+fn fill_masks(nodes: &mut [TlasNode], masks: &[u32]) {
+    for n in (0..nodes.len()).rev() {
+        let mut m = [0u32; 4];
+        for (slot, &c) in m.iter_mut().zip(&nodes[n].child) {
+            *slot = if c == EMPTY_CHILD {
+                0
+            } else if c & LEAF_BIT != 0 {
+                masks.get((c & !LEAF_BIT) as usize).copied().unwrap_or(0)
+            } else {
+                // A child before its parent would break the pass's order; `collapse` never makes
+                // one, and all ones keeps such a subtree visible rather than wrongly hidden.
+                match nodes.get(c as usize) {
+                    Some(k) if c as usize > n => k.mask.iter().fold(0, |a, b| a | b),
+                    _ => u32::MAX,
+                }
+            };
+        }
+        nodes[n].mask = m;
+    }
+}
 
 /// Collapses `bvh` (leaves of one instance each) into 4-wide nodes: each node takes its binary
 /// node's two children and opens the interior child of largest surface area until it has four
@@ -189,6 +246,7 @@ fn collapse(bvh: &Bvh2) -> Vec<TlasNode> {
     let mut out = vec![TlasNode {
         bounds: AabbLanes::empty(),
         child: [EMPTY_CHILD; 4],
+        mask: [0; 4],
     }];
     // (binary node, wide slot): a single-leaf tree gets a root holding that leaf.
     let mut stack = vec![(0u32, 0usize)];
@@ -227,6 +285,7 @@ fn collapse(bvh: &Bvh2) -> Vec<TlasNode> {
                 out.push(TlasNode {
                     bounds: AabbLanes::empty(),
                     child: [EMPTY_CHILD; 4],
+                    mask: [0; 4],
                 });
                 stack.push((k, out.len() - 1));
                 (out.len() - 1) as u32
@@ -235,6 +294,7 @@ fn collapse(bvh: &Bvh2) -> Vec<TlasNode> {
         out[at] = TlasNode {
             bounds: AabbLanes::from_boxes(&boxes),
             child,
+            mask: [0; 4],
         };
     }
     out
@@ -324,13 +384,58 @@ impl Tlas {
             ..BuildParams::quality()
         };
         let (bvh, _) = Bvh2::build(&boxes[..], &params)?;
+        let masks: Vec<u32> = instances.iter().map(|i| i.mask).collect();
+        let mut nodes = collapse(&bvh);
+        fill_masks(&mut nodes, &masks);
         Ok(Self {
-            nodes: collapse(&bvh),
+            nodes,
             bvh,
             inverse,
             blas: instances.iter().map(|i| i.blas).collect(),
+            masks,
             left_out,
         })
+    }
+
+    /// The visibility mask of instance `instance` ([`Instance::mask`]), `None` past the
+    /// instances given to [`build`](Self::build).
+    ///
+    /// ```
+    /// use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}};
+    /// let tris = strahl::scene::icosphere(1).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let tlas = Tlas::build(&[Instance::new(strahl::glam::Affine3A::IDENTITY, 0).with_mask(6)], &blases).unwrap();
+    /// assert_eq!((tlas.mask(0), tlas.mask(1)), (Some(6), None));
+    /// ```
+    pub fn mask(&self, instance: usize) -> Option<u32> {
+        self.masks.get(instance).copied()
+    }
+
+    /// Sets the visibility mask of instance `instance` without a rebuild (the tree's slot masks
+    /// are made again: time linear in the number of TLAS nodes, about a third of the number of
+    /// instances). Returns `false`, changing nothing, past the instances given to
+    /// [`build`](Self::build).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let mut tlas = Tlas::build(&[Instance::new(strahl::glam::Affine3A::IDENTITY, 0)], &blases).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, -3.0), Vec3::Z);
+    /// assert!(tlas.occluded::<Moller, _, 8>(&blases, &ray));
+    /// assert!(tlas.set_mask(0, 0)); // hidden from every ray
+    /// assert!(!tlas.occluded::<Moller, _, 8>(&blases, &ray));
+    /// assert!(!tlas.set_mask(1, 0));
+    /// ```
+    pub fn set_mask(&mut self, instance: usize, mask: u32) -> bool {
+        let Some(m) = self.masks.get_mut(instance) else {
+            return false;
+        };
+        *m = mask;
+        fill_masks(&mut self.nodes, &self.masks);
+        true
     }
 
     /// Number of instances given to [`build`](Self::build), left out ones included.
@@ -354,7 +459,7 @@ impl Tlas {
     }
 
     /// Bytes of the TLAS: its nodes and primitive indices, and per instance the inverse
-    /// transform and the BLAS index (the BLASes not counted).
+    /// transform, the BLAS index and the mask (the BLASes not counted).
     ///
     /// ```
     /// use strahl::{build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}};
@@ -362,9 +467,9 @@ impl Tlas {
     /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
     /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
     /// let tlas = Tlas::build(&[Instance::new(strahl::glam::Affine3A::IDENTITY, 0)], &blases).unwrap();
-    /// // One binary leaf (32 bytes) and its index (4), one 4-wide node (112), one inverse (64), one
-    /// // BLAS index (4).
-    /// assert_eq!(tlas.memory_bytes(), 32 + 4 + 112 + size_of::<strahl::glam::Affine3A>() + 4);
+    /// // One binary leaf (32 bytes) and its index (4), one 4-wide node (128), one inverse (64), one
+    /// // BLAS index (4), one mask (4).
+    /// assert_eq!(tlas.memory_bytes(), 32 + 4 + 128 + size_of::<strahl::glam::Affine3A>() + 4 + 4);
     /// ```
     pub fn memory_bytes(&self) -> usize {
         core::mem::size_of_val(self.bvh.nodes.as_slice())
@@ -372,6 +477,7 @@ impl Tlas {
             + core::mem::size_of_val(self.nodes.as_slice())
             + core::mem::size_of_val(self.inverse.as_slice())
             + core::mem::size_of_val(self.blas.as_slice())
+            + core::mem::size_of_val(self.masks.as_slice())
     }
 
     /// `true` if no instance can be hit.
@@ -421,7 +527,7 @@ impl Tlas {
         blases: &[BvhWide<L, N>],
         ray: &Ray,
     ) -> Option<InstanceHit> {
-        self.walk::<T, L, N, _, false>(blases, ray, &mut AcceptAll)
+        self.walk::<T, L, N, _, false, false>(blases, ray, u32::MAX, &mut AcceptAll)
     }
 
     /// `true` if `ray` hits any instance within `[tmin, tmax)` (any hit: stops at the first).
@@ -438,7 +544,8 @@ impl Tlas {
     /// assert!(tlas.occluded::<Moller, _, 8>(&blases, &Ray::with_range(Vec3::ZERO, Vec3::Z, 0.0, 4.5)));
     /// ```
     pub fn occluded<T: TriangleTest, L: Lane, const N: usize>(&self, blases: &[BvhWide<L, N>], ray: &Ray) -> bool {
-        self.walk::<T, L, N, _, true>(blases, ray, &mut AcceptAll).is_some()
+        self.walk::<T, L, N, _, true, false>(blases, ray, u32::MAX, &mut AcceptAll)
+            .is_some()
     }
 
     /// [`intersect`](Self::intersect) counting only the hits `filter` accepts
@@ -467,7 +574,7 @@ impl Tlas {
         ray: &Ray,
         mut filter: impl HitFilter<InstanceHit>,
     ) -> Option<InstanceHit> {
-        self.walk::<T, L, N, _, false>(blases, ray, &mut filter)
+        self.walk::<T, L, N, _, false, false>(blases, ray, u32::MAX, &mut filter)
     }
 
     /// [`occluded`](Self::occluded) counting only the hits `filter` accepts (see
@@ -489,7 +596,65 @@ impl Tlas {
         ray: &Ray,
         mut filter: impl HitFilter<InstanceHit>,
     ) -> bool {
-        self.walk::<T, L, N, _, true>(blases, ray, &mut filter).is_some()
+        self.walk::<T, L, N, _, true, false>(blases, ray, u32::MAX, &mut filter)
+            .is_some()
+    }
+
+    /// [`intersect`](Self::intersect) seeing only the instances whose
+    /// [`mask`](Instance::mask) shares a bit with `ray_mask` (Embree's `RTCRay::mask`, DXR's
+    /// `InstanceInclusionMask`): the closest hit among them. Subtrees holding no such instance
+    /// are skipped whole. `u32::MAX` gives [`intersect`](Self::intersect)'s answer.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// use strahl::glam::Affine3A;
+    /// const CAMERA: u32 = 1;
+    /// const SHADOW: u32 = 2;
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let at = |z: f32| Affine3A::from_translation(Vec3::new(0.0, 0.0, z));
+    /// let instances = [
+    ///     Instance::new(at(5.0), 0).with_mask(CAMERA),          // seen, casts no shadow
+    ///     Instance::new(at(10.0), 0).with_mask(CAMERA | SHADOW), // seen, casts shadows
+    /// ];
+    /// let tlas = Tlas::build(&instances, &blases).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, 0.0), Vec3::Z);
+    /// assert_eq!(tlas.intersect_masked::<Moller, _, 8>(&blases, &ray, CAMERA).unwrap().instance, 0);
+    /// assert_eq!(tlas.intersect_masked::<Moller, _, 8>(&blases, &ray, SHADOW).unwrap().instance, 1);
+    /// assert_eq!(tlas.intersect_masked::<Moller, _, 8>(&blases, &ray, 4), None);
+    /// ```
+    pub fn intersect_masked<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        ray: &Ray,
+        ray_mask: u32,
+    ) -> Option<InstanceHit> {
+        self.walk::<T, L, N, _, false, true>(blases, ray, ray_mask, &mut AcceptAll)
+    }
+
+    /// [`occluded`](Self::occluded) seeing only the instances whose [`mask`](Instance::mask)
+    /// shares a bit with `ray_mask` (see [`intersect_masked`](Self::intersect_masked)).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let glass = Instance::new(strahl::glam::Affine3A::IDENTITY, 0).with_mask(0b01);
+    /// let tlas = Tlas::build(&[glass], &blases).unwrap();
+    /// let shadow = Ray::with_range(Vec3::new(0.1, 0.2, -3.0), Vec3::Z, 0.0, 10.0);
+    /// assert!(tlas.occluded_masked::<Moller, _, 8>(&blases, &shadow, 0b01));
+    /// assert!(!tlas.occluded_masked::<Moller, _, 8>(&blases, &shadow, 0b10));
+    /// ```
+    pub fn occluded_masked<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        ray: &Ray,
+        ray_mask: u32,
+    ) -> bool {
+        self.walk::<T, L, N, _, true, true>(blases, ray, ray_mask, &mut AcceptAll)
+            .is_some()
     }
 
     /// [`intersect`](Self::intersect) for every ray of a batch: `hits[i]` for `rays[i]` (the
@@ -638,6 +803,9 @@ impl Tlas {
 
     /// The TLAS walk over 4-wide nodes: children hit in order of entry distance, the nearest
     /// next and the others on the stack (farthest deepest) with their entry distances.
+    /// `MASKED`: slots whose mask shares no bit with `ray_mask` are not entered; else (the
+    /// unmasked calls, whose ray mask is all ones) only instances of mask `0` are skipped, at
+    /// their leaf, so the unmasked walk does no per-node mask work.
     // PERF: against the binary TLAS walk it replaced (scalar slab tests, leaves of up to 8
     // instances), the same run of `cargo bench --features embree --bench instance` (Intel Xeon,
     // 2026-12-05): diffuse rays 66.8 -> 61.3 ms (bunnies), 81.1 -> 70.2 ms (spheres); primary
@@ -645,11 +813,23 @@ impl Tlas {
     // 46.0 / 50.0 / 52.8 / 54.0 ms (primary and diffuse, bunnies and spheres).
     // 8-wide nodes (f32x8 lanes, up to 8 hits sorted), measured next: diffuse 59.5 and 70.1 ms,
     // primary 55.0 and 66.0 ms (slower), so 4 wide.
+    // PERF: the per-node mask test in every walk measured 1-3% slower on the instance bench's
+    // closest-hit rows (one run, old and new builds one after the other), hence the two forms
+    // (`MASKED`); with the test in the masked walk only, the unmasked walks are within 1% of the
+    // code before masks on every row (two rounds, old and new taking turns, 2026-12-07).
     #[inline(always)]
-    fn walk<T: TriangleTest, L: Lane, const N: usize, F: HitFilter<InstanceHit>, const ANY: bool>(
+    fn walk<
+        T: TriangleTest,
+        L: Lane,
+        const N: usize,
+        F: HitFilter<InstanceHit>,
+        const ANY: bool,
+        const MASKED: bool,
+    >(
         &self,
         blases: &[BvhWide<L, N>],
         ray: &Ray,
+        ray_mask: u32,
         f: &mut F,
     ) -> Option<InstanceHit> {
         let mut r = prepare::<T>(ray);
@@ -667,6 +847,15 @@ impl Tlas {
             if cur & LEAF_BIT == 0 {
                 if let Some(node) = self.nodes.get(cur as usize) {
                     let (dist, mut mask) = node_lanes::<T, f32x4>(&r, &node.bounds);
+                    // Slots with no instance the ray can see are not entered (empty slots hold
+                    // mask 0 and an empty box: missed either way).
+                    if MASKED {
+                        let mut seen = 0u32;
+                        for (i, &m) in node.mask.iter().enumerate() {
+                            seen |= u32::from(m & ray_mask != 0) << i;
+                        }
+                        mask &= seen;
+                    }
                     let d = dist.to_array();
                     // The hit children, nearest first (ties: the lower slot).
                     let mut hit = [(0u32, 0.0f32); 4];
@@ -695,6 +884,7 @@ impl Tlas {
                     }
                 }
             } else if cur != EMPTY_CHILD
+                && (MASKED || self.masks.get((cur & !LEAF_BIT) as usize).is_some_and(|&m| m != 0))
                 && let Some(h) = self.trace_instance::<T, L, N, F, ANY>(blases, cur & !LEAF_BIT, ray, r.tmax, f)
             {
                 best = Some(InstanceHit {
@@ -717,5 +907,63 @@ impl Tlas {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::layout::Bvh4;
+
+    /// The union of the masks of the instances below child code `c`.
+    fn below(nodes: &[TlasNode], masks: &[u32], c: u32) -> u32 {
+        if c == EMPTY_CHILD {
+            0
+        } else if c & LEAF_BIT != 0 {
+            masks[(c & !LEAF_BIT) as usize]
+        } else {
+            nodes[c as usize]
+                .child
+                .iter()
+                .fold(0, |a, &k| a | below(nodes, masks, k))
+        }
+    }
+
+    #[test]
+    fn slot_masks_are_the_union_below() {
+        let tris = crate::scene::icosphere(1).to_soup();
+        let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+        let blases = [Bvh4::from_bvh2(&b2, &tris[..]).unwrap()];
+        let mut rng = crate::scene::Rng::new(5);
+        let inst: Vec<Instance> = (0..300)
+            .map(|i| {
+                let t = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 50.0;
+                // One in ten left out (a NaN transform): its mask must not count.
+                let t = if i % 10 == 3 { Vec3::NAN } else { t };
+                Instance::new(Affine3A::from_translation(t), 0).with_mask(1 << (i % 7))
+            })
+            .collect();
+        let mut tlas = Tlas::build(&inst, &blases).unwrap();
+        assert_eq!(tlas.left_out(), 30);
+        let check = |tlas: &Tlas| {
+            assert!(tlas.nodes.len() > 20);
+            for n in &tlas.nodes {
+                for (slot, &c) in n.child.iter().enumerate() {
+                    assert_eq!(n.mask[slot], below(&tlas.nodes, &tlas.masks, c));
+                }
+            }
+            // The root sees every bit of the instances in the tree, none of the left-out ones'.
+            let root = tlas.nodes[0].mask.iter().fold(0, |a, b| a | b);
+            let want = (0..300).filter(|i| i % 10 != 3).fold(0, |a, i| a | tlas.masks[i]);
+            assert_eq!(root, want);
+        };
+        check(&tlas);
+        // Bit 0 gone from every instance (those of `i % 7 == 0`): gone from every slot.
+        for i in (0..300).step_by(7) {
+            assert!(tlas.set_mask(i, 0));
+        }
+        check(&tlas);
+        assert_eq!(tlas.mask(7), Some(0));
+        assert!(tlas.nodes.iter().all(|n| n.mask.iter().all(|m| m & 1 == 0)));
     }
 }
