@@ -13,8 +13,9 @@
 //! `RTC_GEOMETRY_TYPE_INSTANCE` geometries over one mesh scene, `embree_instances`) and the
 //! flattened scene (`embree_flat`), `rtcIntersect1` / `rtcOccluded1`, default (non-robust) mode.
 //!
-//! Masks (`*_masked`): half the instances, drawn at random, carry mask `0b10` (say, casting no
-//! shadow), the rest `0b11`, and the rays trace with mask `0b01`, so they see half the scene:
+//! Masks (`*_masked`): half the instances, drawn at random, carry mask `0b10` (seen only by rays
+//! with bit 1, say shadow rays), the rest `0b11`, and the rays trace with mask `0b01`, so they see
+//! half the scene:
 //! `Tlas::intersect_masked` / `occluded_masked` against Embree's geometry masks
 //! (`rtcSetGeometryMask`, `RTCRay::mask`) and against the same visibility as a hit filter
 //! (`tlas_bvh8_filter_mask`: `intersect_filtered` rejecting the hits of hidden instances, which
@@ -227,6 +228,16 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
                         .count()
                 })
             });
+            let (o_tlas, o_em) = (
+                rays.iter()
+                    .filter(|r| masked.occluded_masked::<Moller, _, 8>(&blases, r, RAY_MASK))
+                    .count(),
+                rays.iter().filter(|r| em.occluded1_masked(r, RAY_MASK)).count(),
+            );
+            assert!(
+                o_em.abs_diff(o_tlas) * 1000 <= rays.len(),
+                "{name}/{kind}: Embree masked occluded {o_em} vs {o_tlas}"
+            );
             g.bench_function("embree_instances_occluded_masked", |bch| {
                 bch.iter(|| {
                     black_box(rays)

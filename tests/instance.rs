@@ -547,8 +547,8 @@ fn masks_hide_instances_as_brute_force_over_the_visible_ones() {
     let tlas8 = Tlas::build(&inst, &b8).unwrap();
     let tlas4 = Tlas::build(&inst, &b4).unwrap();
     assert_eq!(tlas8.mask(0), Some(0));
-    let mut hidden = 0;
     for ray_mask in [u32::MAX, 0b001, 0b010, 0b100, 0b110, 0] {
+        let mut hidden = 0;
         let sees = |h: &InstanceHit| inst[h.instance as usize].mask & ray_mask != 0;
         for ray in &rays {
             let want = reference_filtered::<Moller>(&meshes, &inst, None, ray, &sees);
@@ -575,9 +575,10 @@ fn masks_hide_instances_as_brute_force_over_the_visible_ones() {
             let all = reference::<Moller>(&meshes, &inst, ray);
             hidden += usize::from(all.is_some() && all != want);
         }
+        // Every ray mask changed answers (the instances of mask 0 for all ones), or the
+        // comparison says little.
+        assert!(hidden > 50, "ray mask {ray_mask:#b} changed {hidden} answers");
     }
-    // The masks changed answers, or the comparison says little.
-    assert!(hidden > 200, "the masks changed {hidden} answers");
     // `set_mask`: every instance's mask changed in place answers as a fresh build.
     let mut changed = tlas8.clone();
     let mut rebuilt = inst.clone();

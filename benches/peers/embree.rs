@@ -244,6 +244,7 @@ unsafe extern "C" {
     fn rtcSetGeometryInstancedScene(geometry: RTCGeometry, scene: RTCScene);
     fn rtcSetGeometryTransform(geometry: RTCGeometry, time_step: c_uint, format: c_uint, xfm: *const c_void);
     fn rtcSetGeometryMask(geometry: RTCGeometry, mask: c_uint);
+    fn rtcGetDeviceProperty(device: RTCDevice, prop: c_uint) -> isize;
     fn rtcIntersect1(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
     fn rtcOccluded1(scene: RTCScene, ctx: *mut RTCIntersectContext, ray: *mut RTCRay);
     fn rtcIntersect1M(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit, m: c_uint, stride: usize);
@@ -538,6 +539,13 @@ impl<'d> InstanceScene<'d> {
         masks: &[u32],
         quality: Quality,
     ) -> Self {
+        const RTC_DEVICE_PROPERTY_RAY_MASK_SUPPORTED: c_uint = 64;
+        // SAFETY: a property query on a live device.
+        let masks_work = unsafe { rtcGetDeviceProperty(device.0, RTC_DEVICE_PROPERTY_RAY_MASK_SUPPORTED) } != 0;
+        assert!(
+            masks.is_empty() || masks_work,
+            "this Embree was built without ray masks (EMBREE_RAY_MASK)"
+        );
         let blas = Scene::new(device, tris, quality);
         // SAFETY: standard Embree instance setup on a live device: the instanced scene is
         // committed (by `Scene::new`) and outlives the top scene (kept in `_blas`, dropped after

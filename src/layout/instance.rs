@@ -124,8 +124,8 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 ///   [`intersect_masked`](Tlas::intersect_masked) and [`occluded_masked`](Tlas::occluded_masked)
 ///   take a ray mask and see only the instances with `mask & ray_mask != 0`, for objects hidden
 ///   from the camera or casting no shadow. Each node slot holds the union (bitwise or) of the
-///   masks below it, so a subtree no instance of which the ray can see is skipped whole, without
-///   its boxes tested. [`set_mask`](Tlas::set_mask) changes an instance's mask without a rebuild.
+///   masks below it, so a subtree no instance of which the ray can see is not entered (its
+///   slot's box is tested with its siblings', none inside it). [`set_mask`](Tlas::set_mask) changes an instance's mask without a rebuild.
 /// - **Ties**: where two instances are hit at exactly the same `t`, the one found first wins
 ///   (the TLAS's near-to-far order); within one BLAS, the wide traversal's rule.
 /// - **Accuracy**: hits are those of a trace of the object-space ray through each instance's BLAS
@@ -938,9 +938,13 @@ mod tests {
         let inst: Vec<Instance> = (0..300)
             .map(|i| {
                 let t = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 50.0;
-                // One in ten left out (a NaN transform): its mask must not count.
-                let t = if i % 10 == 3 { Vec3::NAN } else { t };
-                Instance::new(Affine3A::from_translation(t), 0).with_mask(1 << (i % 7))
+                // One in ten left out (a NaN transform), with a bit of its own that must not
+                // reach any slot.
+                if i % 10 == 3 {
+                    Instance::new(Affine3A::from_translation(Vec3::NAN), 0).with_mask(1 << 20)
+                } else {
+                    Instance::new(Affine3A::from_translation(t), 0).with_mask(1 << (i % 7))
+                }
             })
             .collect();
         let mut tlas = Tlas::build(&inst, &blases).unwrap();
@@ -953,6 +957,7 @@ mod tests {
                 }
             }
             // The root sees every bit of the instances in the tree, none of the left-out ones'.
+            assert!(tlas.nodes.iter().all(|n| n.mask.iter().all(|m| m & 1 << 20 == 0)));
             let root = tlas.nodes[0].mask.iter().fold(0, |a, b| a | b);
             let want = (0..300).filter(|i| i % 10 != 3).fold(0, |a, i| a | tlas.masks[i]);
             assert_eq!(root, want);
@@ -964,6 +969,9 @@ mod tests {
         }
         check(&tlas);
         assert_eq!(tlas.mask(7), Some(0));
+        // A left-out instance's new mask reaches no slot either.
+        assert!(tlas.set_mask(13, 1 << 20 | 1));
+        check(&tlas);
         assert!(tlas.nodes.iter().all(|n| n.mask.iter().all(|m| m & 1 == 0)));
     }
 }

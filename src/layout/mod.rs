@@ -22,8 +22,8 @@
 //! # Refit
 //! [`BvhWide::refit`] (and, with `std`, `BvhWide::refit_par`) keeps the tree's shape and fills
 //! its packs and boxes again from moved triangles: for animated meshes, about 16x faster than a
-//! rebuild on 1M triangles, at no cost in trace time for small motion (README, "Refitting
-//! animated geometry").
+//! rebuild on 1M triangles, at no cost in trace time for small motion (`benches/RESULTS.md`,
+//! "Refitting animated geometry").
 //!
 //! # Saving and loading
 //! [`BvhWide::to_bytes`] writes a tree; [`BvhWide::from_bytes`] reads it back as a checked copy
