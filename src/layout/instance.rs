@@ -212,12 +212,8 @@ fn fill_masks(nodes: &mut [TlasNode], masks: &[u32]) {
             } else if c & LEAF_BIT != 0 {
                 masks.get((c & !LEAF_BIT) as usize).copied().unwrap_or(0)
             } else {
-                // A child before its parent would break the pass's order; `collapse` never makes
-                // one, and all ones keeps such a subtree visible rather than wrongly hidden.
-                match nodes.get(c as usize) {
-                    Some(k) if c as usize > n => k.mask.iter().fold(0, |a, b| a | b),
-                    _ => u32::MAX,
-                }
+                debug_assert!(c as usize > n, "collapse puts children after their parent");
+                nodes[c as usize].mask.iter().fold(0, |a, b| a | b)
             };
         }
         nodes[n].mask = m;
