@@ -587,13 +587,16 @@ fn masks_hide_instances_as_brute_force_over_the_visible_ones() {
         assert!(changed.set_mask(i, x.mask));
     }
     assert!(!changed.set_mask(inst.len(), 1));
+    // `set_masks`: the same changes in one call.
+    let mut batch = tlas8.clone();
+    let changes: Vec<(usize, u32)> = rebuilt.iter().map(|x| x.mask).enumerate().collect();
+    assert!(batch.set_masks(&changes));
     let fresh = Tlas::build(&rebuilt, &b8).unwrap();
     for ray in &rays {
         for ray_mask in [0b01, 0b10, u32::MAX] {
-            assert_eq!(
-                changed.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask),
-                fresh.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask)
-            );
+            let want = fresh.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask);
+            assert_eq!(changed.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask), want);
+            assert_eq!(batch.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask), want);
         }
     }
 }

@@ -23,11 +23,26 @@ pub struct MpiTransport {
 
 impl MpiTransport {
     /// Wraps a communicator (usually `universe.world()`).
+    ///
+    /// ```no_run
+    /// use strahl::composite::{MpiTransport, Transport};
+    /// let universe = mpi::initialize().expect("MPI is initialised once");
+    /// let t = MpiTransport::new(universe.world());
+    /// assert!(t.rank() < t.size());
+    /// ```
     pub fn new(comm: SimpleCommunicator) -> Self {
         Self { comm }
     }
 
     /// The communicator, for the caller's own collectives.
+    ///
+    /// ```no_run
+    /// use mpi::traits::CommunicatorCollectives;
+    /// use strahl::composite::MpiTransport;
+    /// let universe = mpi::initialize().expect("MPI is initialised once");
+    /// let t = MpiTransport::new(universe.world());
+    /// t.communicator().barrier(); // e.g. before timing a composite
+    /// ```
     pub fn communicator(&self) -> &SimpleCommunicator {
         &self.comm
     }

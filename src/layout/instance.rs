@@ -434,6 +434,46 @@ impl Tlas {
         true
     }
 
+    /// [`set_mask`](Self::set_mask) for many instances at once: `(instance, mask)` pairs applied
+    /// in order (a later pair for the same instance wins), the slot masks made again once. Returns
+    /// `false`, changing nothing, if any instance is past those given to [`build`](Self::build).
+    /// For a frame that changes many masks this costs one [`set_mask`](Self::set_mask), not one
+    /// per change.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// use strahl::glam::Affine3A;
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let row: Vec<Instance> = (0..4)
+    ///     .map(|i| Instance::new(Affine3A::from_translation(Vec3::new(3.0 * i as f32, 0.0, 0.0)), 0))
+    ///     .collect();
+    /// let mut tlas = Tlas::build(&row, &blases).unwrap();
+    /// // Hide the even instances from rays of mask 1, in one call.
+    /// assert!(tlas.set_masks(&[(0, 0b10), (2, 0b10)]));
+    /// let visible = |tlas: &Tlas, i: usize| {
+    ///     let ray = Ray::new(Vec3::new(3.0 * i as f32, 0.1, -5.0), Vec3::Z);
+    ///     tlas.occluded_masked::<Moller, _, 8>(&blases, &ray, 0b01)
+    /// };
+    /// assert_eq!((0..4).map(|i| visible(&tlas, i)).collect::<Vec<_>>(), [false, true, false, true]);
+    /// // One pair out of range: nothing changes.
+    /// assert!(!tlas.set_masks(&[(1, 0), (4, 0)]));
+    /// assert_eq!(tlas.mask(1), Some(u32::MAX));
+    /// ```
+    pub fn set_masks(&mut self, changes: &[(usize, u32)]) -> bool {
+        if changes.iter().any(|&(i, _)| i >= self.masks.len()) {
+            return false;
+        }
+        for &(i, m) in changes {
+            self.masks[i] = m;
+        }
+        if !changes.is_empty() {
+            fill_masks(&mut self.nodes, &self.masks);
+        }
+        true
+    }
+
     /// Number of instances given to [`build`](Self::build), left out ones included.
     ///
     /// ```
@@ -969,5 +1009,18 @@ mod tests {
         assert!(tlas.set_mask(13, 1 << 20 | 1));
         check(&tlas);
         assert!(tlas.nodes.iter().all(|n| n.mask.iter().all(|m| m & 1 == 0)));
+        // Many at once: the same slot masks as one `set_mask` per change.
+        let changes: Vec<(usize, u32)> = (0..300).step_by(3).map(|i| (i, (i as u32 * 37) & 0xff)).collect();
+        let mut one_by_one = tlas.clone();
+        for &(i, m) in &changes {
+            assert!(one_by_one.set_mask(i, m));
+        }
+        assert!(tlas.set_masks(&changes));
+        check(&tlas);
+        assert_eq!(tlas.masks, one_by_one.masks);
+        assert!(tlas.nodes.iter().zip(&one_by_one.nodes).all(|(a, b)| a.mask == b.mask));
+        // One index out of range: nothing changes.
+        assert!(!tlas.set_masks(&[(0, 1), (300, 1)]));
+        assert_eq!(tlas.masks, one_by_one.masks);
     }
 }

@@ -447,6 +447,13 @@ pub trait HitFilter<H = Hit> {
     /// filter altogether. Leave it `false`.
     const ACCEPTS_ALL: bool = false;
     /// `true` if `hit` counts.
+    ///
+    /// ```
+    /// use strahl::{Hit, traverse::HitFilter};
+    /// let mut near = |h: &Hit| h.t < 5.0; // closures are filters
+    /// assert!(near.accept(&Hit { t: 1.0, u: 0.2, v: 0.3, prim: 0 }));
+    /// assert!(!near.accept(&Hit { t: 9.0, u: 0.2, v: 0.3, prim: 0 }));
+    /// ```
     fn accept(&mut self, hit: &H) -> bool;
 }
 
