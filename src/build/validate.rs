@@ -480,8 +480,8 @@ type Polygon = Vec<[f64; 3]>;
 /// Whether the boxes together cover every point of triangle `t`, in f64: the parts of `t` outside
 /// each box in turn are cut off, box by box (Sutherland-Hodgman against the six planes), and what
 /// is left must be nothing but slivers on the boxes' faces (at most `1e-12` of the triangle's
-/// coordinates' magnitude outside: the clipping's own rounding; the builder pads its boxes by 8
-/// f32 epsilons). A box that misses a piece leaves it whole. Past 4,096 pieces or 2^22 piece
+/// coordinates' magnitude outside: the clipping's own rounding, so each box is widened by that
+/// much; the builder pads its boxes by 8 f32 epsilons). A box that misses a piece leaves it whole. Past 4,096 pieces or 2^22 piece
 /// visits (a few hundred milliseconds) the answer is `true` (the vertices were checked already),
 /// so that no input makes this slower.
 fn covered_by(t: &Triangle, boxes: &[Aabb]) -> bool {
@@ -494,7 +494,13 @@ fn covered_by(t: &Triangle, boxes: &[Aabb]) -> bool {
     let mut next = Vec::new();
     let mut work = 0usize;
     for b in boxes {
-        let (lo, hi) = (b.min.to_array().map(f64::from), b.max.to_array().map(f64::from));
+        // The box widened by the tolerance: a sliver the clipping leaves on a face counts as
+        // inside (left outside, a sliver wholly past the face by less than `tol` was kept whole
+        // as a miss; found by the `bvh` fuzz target, seed `crash-spatial-sliver`).
+        let (lo, hi) = (
+            b.min.to_array().map(|x| f64::from(x) - tol),
+            b.max.to_array().map(|x| f64::from(x) + tol),
+        );
         for mut piece in pieces.drain(..) {
             work += 1;
             if work > 1 << 22 {
@@ -565,4 +571,42 @@ fn clip(p: &[[f64; 3]], f: impl Fn(&[f64; 3]) -> f64) -> Polygon {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slivers_on_a_face_count_as_covered() {
+        use glam::Vec3;
+        // A triangle split by spatial splits into three leaves (the `bvh` fuzz target's seed
+        // `crash-spatial-sliver`): they cover it, but clipping by the first two leaves left a
+        // sliver of the cut at y = 0 lying 5e-16 above the third box's top face, which the
+        // check took for a miss.
+        let t = [
+            Vec3::new(6.0, 8.0, -3.0),
+            Vec3::new(-3.0, -5.0, -4.0),
+            Vec3::new(7.0, -6.0, 6.0),
+        ];
+        let boxes = [
+            Aabb::new(Vec3::new(0.4615326, 0.0, -3.6153884), Vec3::new(6.2777843, 8.0, -0.5)),
+            Aabb::new(
+                Vec3::new(0.49999332, 0.0, -0.5),
+                Vec3::new(6.5714355, 4.1111183, 2.1428628),
+            ),
+            Aabb::new(Vec3::new(-3.0, -6.0, -4.0), Vec3::new(7.0, 0.0, 6.0)),
+        ];
+        assert!(covered_by(&t, &boxes));
+        // In any order.
+        assert!(covered_by(&t, &[boxes[2], boxes[0], boxes[1]]));
+        // Without the third box the part below y = 0 is uncovered; without the second, a
+        // triangle of the part above.
+        assert!(!covered_by(&t, &boxes[..2]));
+        assert!(!covered_by(&t, &[boxes[0], boxes[2]]));
+        // A box short of the triangle by far more than the tolerance still leaves a piece.
+        let mut short = boxes;
+        short[2].max.y = -1e-3;
+        assert!(!covered_by(&t, &short));
+    }
 }
