@@ -21,6 +21,13 @@
 //! (`tlas_bvh8_filter_mask`: `intersect_filtered` rejecting the hits of hidden instances, which
 //! still walks their BLASes). Their hit counts are checked against each other first.
 //!
+//! Batches (`*_batch`): `Tlas::intersect_batch` / `occluded_batch`, which trace each group of 8
+//! consecutive rays with the same direction signs and close origins (the camera's 4 x 2 tiles)
+//! as one packet (`Tlas::intersect8`: the TLAS walked by the packet, each instance's BLAS by a
+//! BLAS packet), against `Bvh8::intersect_batch` on the flattened scene and Embree's stream API
+//! through its instances (`rtcIntersect1M`, `embree_instances_1M`; its `rtcOccluded1M` through
+//! instances did not finish a criterion run here and is left out).
+//!
 //! `cargo bench --bench instance -- --noplot` (add `--features embree` for Embree)
 
 #[path = "common/mod.rs"]
@@ -158,6 +165,37 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
                     .count()
             })
         });
+        // Batches: coherent groups of 8 (the camera's 4 x 2 tiles) as packets, the others one
+        // call per ray; the same hits as one call per ray.
+        let mut hits = vec![None; rays.len()];
+        let mut flat_hits = vec![None; rays.len()];
+        let mut occ = vec![false; rays.len()];
+        tlas.intersect_batch::<Moller, _, 8>(&blases, rays, &mut hits);
+        assert_eq!(hits.iter().flatten().count(), n_tlas, "{name}/{kind}: batch hits");
+        tlas.occluded_batch::<Moller, _, 8>(&blases, rays, &mut occ);
+        assert_eq!(
+            occ.iter().filter(|&&o| o).count(),
+            n_tlas,
+            "{name}/{kind}: batch occluded"
+        );
+        g.bench_function("flat_bvh8_batch", |bch| {
+            bch.iter(|| {
+                flat.intersect_batch::<Moller>(black_box(rays), &mut flat_hits);
+                flat_hits.iter().flatten().count()
+            })
+        });
+        g.bench_function("tlas_bvh8_batch", |bch| {
+            bch.iter(|| {
+                tlas.intersect_batch::<Moller, _, 8>(&blases, black_box(rays), &mut hits);
+                hits.iter().flatten().count()
+            })
+        });
+        g.bench_function("tlas_bvh8_occluded_batch", |bch| {
+            bch.iter(|| {
+                tlas.occluded_batch::<Moller, _, 8>(&blases, black_box(rays), &mut occ);
+                occ.iter().filter(|&&o| o).count()
+            })
+        });
         let n_masked = rays
             .iter()
             .filter(|r| masked.intersect_masked::<Moller, _, 8>(&blases, r, RAY_MASK).is_some())
@@ -211,6 +249,22 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
             });
             g.bench_function("embree_instances_occluded", |bch| {
                 bch.iter(|| black_box(rays).iter().filter(|r| ei.occluded1(r)).count())
+            });
+            // Embree's stream API through its instances (256 rays a call, flagged coherent for
+            // the camera's rays), against the batches.
+            let coherent = *kind == "primary";
+            let mut n_1m = 0;
+            ei.intersect1m(rays, coherent, |_, h| n_1m += usize::from(h.is_some()));
+            assert!(
+                n_1m.abs_diff(n_tlas) * 1000 <= rays.len(),
+                "{name}/{kind}: Embree stream {n_1m} vs {n_tlas} hits"
+            );
+            g.bench_function("embree_instances_1M", |bch| {
+                bch.iter(|| {
+                    let mut n = 0;
+                    ei.intersect1m(black_box(rays), coherent, |_, h| n += usize::from(h.is_some()));
+                    n
+                })
             });
             let n_em = rays
                 .iter()

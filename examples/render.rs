@@ -157,11 +157,11 @@ struct Instanced {
 
 impl Tracer for Instanced {
     fn primary(&self, rays: &[Ray], out: &mut [Option<(Hit, u32)>]) {
-        for (o, r) in out.iter_mut().zip(rays) {
-            *o = self
-                .tlas
-                .intersect::<Watertight, _, 8>(&self.blases, r)
-                .map(|h| (h.hit, h.instance));
+        // Coherent: the tile walks the TLAS as one packet, and each bunny's BLAS too.
+        let mut block = [None; 8];
+        self.tlas.intersect8::<Watertight, _, 8>(&self.blases, rays, &mut block);
+        for (o, h) in out.iter_mut().zip(block) {
+            *o = h.map(|h| (h.hit, h.instance));
         }
     }
     fn occluded(&self, rays: &[Ray], out: &mut [bool]) {

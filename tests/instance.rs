@@ -600,3 +600,147 @@ fn masks_hide_instances_as_brute_force_over_the_visible_ones() {
         }
     }
 }
+
+/// Camera rays over the instances in 4 x 2 pixel tiles (each 8 consecutive rays one tile, as
+/// `packet::TileShape` lays them out), from `eye` towards `at`, `w` x `h` pixels.
+fn camera_tiles(eye: Vec3, at: Vec3, w: usize, h: usize) -> Vec<Ray> {
+    let f = (at - eye).normalize();
+    let r = f.cross(Vec3::Y).normalize();
+    let u = r.cross(f);
+    let mut out = Vec::with_capacity(w * h);
+    for ty in (0..h).step_by(2) {
+        for tx in (0..w).step_by(4) {
+            for k in 0..8 {
+                let (x, y) = (tx + k % 4, ty + k / 4);
+                let sx = (x as f32 + 0.5) / w as f32 * 2.0 - 1.0;
+                let sy = 1.0 - (y as f32 + 0.5) / h as f32 * 2.0;
+                out.push(Ray::new(eye, f + r * sx * 0.8 + u * sy * 0.6));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn packets_answer_as_single_rays() {
+    // Packets of 8 through the TLAS (`intersect8`, `occluded8` and their masked forms, BVH8 and
+    // BVH4 BLASes): camera tiles from outside and from inside the instances' region (coherent:
+    // each instance's BLAS is walked by interval culling), and packets of every length from 1 to
+    // 8 cut from random and bad rays (incoherent: single rays inside the BLAS packets). Each lane
+    // answers as one call per ray: the same `t`, the instance and primitive too unless another
+    // visible instance hits at exactly that `t`; any hits exactly. The batch forms (which send
+    // coherent groups as packets) answer alike.
+    let meshes = meshes();
+    let spread = 30.0;
+    let inst: Vec<Instance> = instances(60, meshes.len() as u32, spread, 51)
+        .into_iter()
+        .enumerate()
+        .map(|(i, x)| x.with_mask([u32::MAX, 0b01, 0b10, 0b11, 0][i % 5]))
+        .collect();
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let b4 = blases::<strahl::math::f32x4, 4>(&meshes);
+    let tlas8 = Tlas::build(&inst, &b8).unwrap();
+    let tlas4 = Tlas::build(&inst, &b4).unwrap();
+    let centre = Vec3::splat(spread / 2.0);
+    let mut cam = camera_tiles(Vec3::new(spread / 2.0, spread * 0.6, -spread), centre, 96, 64);
+    cam.extend(camera_tiles(
+        centre + Vec3::new(0.3, 0.2, 0.1),
+        Vec3::new(spread, spread / 2.0, spread),
+        48,
+        32,
+    ));
+    let scattered = rays(300, &inst, spread, 52);
+    let mut packets: Vec<&[Ray]> = cam.chunks(8).collect();
+    let (mut at, mut len) = (0, 1);
+    while at < scattered.len() {
+        let end = (at + len).min(scattered.len());
+        packets.push(&scattered[at..end]);
+        (at, len) = (end, len % 8 + 1);
+    }
+    let mut hit_lanes = 0;
+    let mut ties = 0;
+    for ray_mask in [u32::MAX, 0b01, 0b10] {
+        let sees = |i: u32| inst[i as usize].mask & ray_mask != 0;
+        for p in &packets {
+            let (mut h8, mut h4) = ([None; 8], [None; 8]);
+            let (mut o8, mut o4) = ([false; 8], [false; 8]);
+            if ray_mask == u32::MAX {
+                tlas8.intersect8::<Moller, _, 8>(&b8, p, &mut h8);
+                tlas4.intersect8::<Moller, _, 4>(&b4, p, &mut h4);
+                tlas8.occluded8::<Moller, _, 8>(&b8, p, &mut o8);
+                tlas4.occluded8::<Moller, _, 4>(&b4, p, &mut o4);
+            } else {
+                tlas8.intersect8_masked::<Moller, _, 8>(&b8, p, ray_mask, &mut h8);
+                tlas4.intersect8_masked::<Moller, _, 4>(&b4, p, ray_mask, &mut h4);
+                tlas8.occluded8_masked::<Moller, _, 8>(&b8, p, ray_mask, &mut o8);
+                tlas4.occluded8_masked::<Moller, _, 4>(&b4, p, ray_mask, &mut o4);
+            }
+            // Lanes past the packet are left alone.
+            assert!(h8[p.len()..].iter().all(Option::is_none) && !o8[p.len()..].iter().any(|&o| o));
+            for (l, ray) in p.iter().enumerate() {
+                let want8 = tlas8.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask);
+                let want4 = tlas4.intersect_masked::<Moller, _, 4>(&b4, ray, ray_mask);
+                for (got, want, what) in [(h8[l], want8, "bvh8"), (h4[l], want4, "bvh4")] {
+                    match (got, want) {
+                        (None, None) => {}
+                        (Some(g), Some(w)) => {
+                            assert_eq!(
+                                g.hit.t.to_bits(),
+                                w.hit.t.to_bits(),
+                                "{what} {ray_mask:#b}: {g:?} vs {w:?}"
+                            );
+                            assert!(sees(g.instance), "{what}: a hidden instance hit: {g:?}");
+                            if (g.instance, g.hit.prim) != (w.instance, w.hit.prim) {
+                                // A tie: the instance alone reaches exactly this `t`.
+                                let one = reference_filtered::<Moller>(
+                                    &meshes,
+                                    &inst,
+                                    Some(g.instance as usize),
+                                    ray,
+                                    &|_| true,
+                                );
+                                assert_eq!(one.map(|h| h.hit.t.to_bits()), Some(g.hit.t.to_bits()), "{what}: {g:?}");
+                                ties += 1;
+                            }
+                        }
+                        _ => panic!("{what} {ray_mask:#b}: {got:?} vs {want:?} for {ray:?}"),
+                    }
+                }
+                let occ = tlas8.occluded_masked::<Moller, _, 8>(&b8, ray, ray_mask);
+                assert_eq!((o8[l], o4[l]), (occ, occ), "{ray_mask:#b}: occluded {ray:?}");
+                assert_eq!(occ, want8.is_some());
+                hit_lanes += usize::from(want8.is_some());
+            }
+        }
+    }
+    // Enough hits for the comparison to say something, and ties rare.
+    assert!(hit_lanes > 5000, "{hit_lanes}");
+    assert!(ties * 100 < hit_lanes, "{ties} ties");
+    // The batch forms: the camera tiles go as packets.
+    let single: Vec<Option<InstanceHit>> = cam.iter().map(|r| tlas8.intersect::<Moller, _, 8>(&b8, r)).collect();
+    let (mut hb, mut hp) = (vec![None; cam.len()], vec![None; cam.len()]);
+    tlas8.intersect_batch::<Moller, _, 8>(&b8, &cam, &mut hb);
+    tlas8.intersect_batch_par::<Moller, _, 8>(&b8, &cam, &mut hp, 3);
+    for ((b, p), s) in hb.iter().zip(&hp).zip(&single) {
+        assert_eq!(b, p);
+        assert_eq!(b.map(|h| h.hit.t.to_bits()), s.map(|h| h.hit.t.to_bits()));
+    }
+    let occ: Vec<bool> = cam.iter().map(|r| tlas8.occluded::<Moller, _, 8>(&b8, r)).collect();
+    let mut ob = vec![false; cam.len()];
+    tlas8.occluded_batch::<Moller, _, 8>(&b8, &cam, &mut ob);
+    assert_eq!(ob, occ);
+    // An empty TLAS, and a packet of bad rays only.
+    let mut h = [Some(InstanceHit {
+        hit: Hit::NONE,
+        instance: 9,
+    }); 8];
+    Tlas::default().intersect8::<Moller, _, 8>(&b8, &cam[..8], &mut h);
+    assert_eq!(h, [None; 8]);
+    let bad = &scattered[scattered.len() - 5..];
+    let mut h = [Some(InstanceHit {
+        hit: Hit::NONE,
+        instance: 9,
+    }); 5];
+    tlas8.intersect8::<Moller, _, 8>(&b8, bad, &mut h);
+    assert_eq!(h, [None; 5]);
+}

@@ -418,70 +418,12 @@ impl<'d> Scene<'d> {
     /// which kind they are; `out(i, (t, primitive))` for each ray. The copying is part of what a
     /// caller holding its own rays pays.
     pub fn intersect1m(&self, rays: &[Ray], coherent: bool, mut out: impl FnMut(usize, Option<(f32, u32)>)) {
-        let empty = RTCRayHit {
-            ray: Self::ray(&Ray::new(Vec3::ZERO, Vec3::X)),
-            hit: RTCHit {
-                ng: [0.0; 3],
-                u: 0.0,
-                v: 0.0,
-                prim_id: 0,
-                geom_id: RTC_INVALID_GEOMETRY_ID,
-                inst_id: [0],
-            },
-        };
-        in_streams(
-            rays,
-            empty,
-            |r| RTCRayHit {
-                ray: Self::ray(r),
-                ..empty
-            },
-            |buf| {
-                let mut ctx = context();
-                ctx.flags = coherent as c_uint;
-                // SAFETY: `buf` holds `buf.len()` initialised, aligned RTCRayHits, each
-                // `size_of::<RTCRayHit>()` bytes after the last; the scene is live and committed.
-                unsafe {
-                    rtcIntersect1M(
-                        self.scene,
-                        &mut ctx,
-                        buf.as_mut_ptr(),
-                        buf.len() as c_uint,
-                        std::mem::size_of::<RTCRayHit>(),
-                    )
-                }
-            },
-            |i, b| {
-                out(
-                    i,
-                    (b.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((b.ray.tfar, b.hit.prim_id)),
-                )
-            },
-        );
+        intersect1m(self.scene, rays, coherent, &mut out);
     }
 
     /// Embree's stream API for any-hit rays (`rtcOccluded1M`), as [`intersect1m`](Self::intersect1m).
     pub fn occluded1m(&self, rays: &[Ray], coherent: bool, mut out: impl FnMut(usize, bool)) {
-        in_streams(
-            rays,
-            Self::ray(&Ray::new(Vec3::ZERO, Vec3::X)),
-            Self::ray,
-            |buf| {
-                let mut ctx = context();
-                ctx.flags = coherent as c_uint;
-                // SAFETY: as in `intersect1m`, with RTCRays.
-                unsafe {
-                    rtcOccluded1M(
-                        self.scene,
-                        &mut ctx,
-                        buf.as_mut_ptr(),
-                        buf.len() as c_uint,
-                        std::mem::size_of::<RTCRay>(),
-                    )
-                }
-            },
-            |i, b| out(i, b.tfar == f32::NEG_INFINITY),
-        );
+        occluded1m(self.scene, rays, coherent, &mut out);
     }
 
     /// Eight rays as one packet: `(t, primitive)` per lane.
@@ -593,6 +535,11 @@ impl<'d> InstanceScene<'d> {
     pub fn occluded1_masked(&self, r: &Ray, mask: u32) -> bool {
         occluded1(self.scene, r, mask)
     }
+
+    /// Embree's stream API through the instances (`rtcIntersect1M`, as [`Scene::intersect1m`]).
+    pub fn intersect1m(&self, rays: &[Ray], coherent: bool, mut out: impl FnMut(usize, Option<(f32, u32)>)) {
+        intersect1m(self.scene, rays, coherent, &mut out);
+    }
 }
 
 impl Drop for InstanceScene<'_> {
@@ -600,6 +547,74 @@ impl Drop for InstanceScene<'_> {
         // SAFETY: created by rtcNewScene, released once (before the instanced scene).
         unsafe { rtcReleaseScene(self.scene) }
     }
+}
+
+/// `rtcIntersect1M` on `scene` (see [`Scene::intersect1m`]).
+fn intersect1m(scene: RTCScene, rays: &[Ray], coherent: bool, out: &mut impl FnMut(usize, Option<(f32, u32)>)) {
+    let empty = RTCRayHit {
+        ray: Scene::ray(&Ray::new(Vec3::ZERO, Vec3::X)),
+        hit: RTCHit {
+            ng: [0.0; 3],
+            u: 0.0,
+            v: 0.0,
+            prim_id: 0,
+            geom_id: RTC_INVALID_GEOMETRY_ID,
+            inst_id: [0],
+        },
+    };
+    in_streams(
+        rays,
+        empty,
+        |r| RTCRayHit {
+            ray: Scene::ray(r),
+            ..empty
+        },
+        |buf| {
+            let mut ctx = context();
+            ctx.flags = coherent as c_uint;
+            // SAFETY: `buf` holds `buf.len()` initialised, aligned RTCRayHits, each
+            // `size_of::<RTCRayHit>()` bytes after the last; the scene is live and committed.
+            unsafe {
+                rtcIntersect1M(
+                    scene,
+                    &mut ctx,
+                    buf.as_mut_ptr(),
+                    buf.len() as c_uint,
+                    std::mem::size_of::<RTCRayHit>(),
+                )
+            }
+        },
+        |i, b| {
+            out(
+                i,
+                (b.hit.geom_id != RTC_INVALID_GEOMETRY_ID).then_some((b.ray.tfar, b.hit.prim_id)),
+            )
+        },
+    );
+}
+
+/// `rtcOccluded1M` on `scene` (see [`Scene::occluded1m`]).
+fn occluded1m(scene: RTCScene, rays: &[Ray], coherent: bool, out: &mut impl FnMut(usize, bool)) {
+    in_streams(
+        rays,
+        Scene::ray(&Ray::new(Vec3::ZERO, Vec3::X)),
+        Scene::ray,
+        |buf| {
+            let mut ctx = context();
+            ctx.flags = coherent as c_uint;
+            // SAFETY: as in `intersect1m`, with RTCRays.
+            unsafe {
+                rtcOccluded1M(
+                    scene,
+                    &mut ctx,
+                    buf.as_mut_ptr(),
+                    buf.len() as c_uint,
+                    std::mem::size_of::<RTCRay>(),
+                )
+            }
+        },
+        |i, b| out(i, b.tfar == f32::NEG_INFINITY),
+    );
 }
 
 /// `rtcIntersect1` on a committed scene with ray mask `mask`: `(t, primitive)` of the closest

@@ -490,7 +490,8 @@ fn check_spatial(case: &BvhCase, kept: &[Triangle], scene_tame: bool) {
 /// (the same `t`, or a tie, or a near tie whose hit is real, as [`agrees`] allows), any hits
 /// agreeing with them. The good instances carry masks `0b01`, `0b10` and `0b11`: the masked
 /// traversals see only the instances that share a bit with the ray's mask (checked on every ray;
-/// on tame inputs against the traces of those instances alone).
+/// on tame inputs against the traces of those instances alone). Packets of the case's rays
+/// (`intersect8`, `occluded8`) answer as one call per ray.
 fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
     use strahl::glam::{Affine3A, Mat3};
     use strahl::layout::{Instance, Tlas};
@@ -532,6 +533,40 @@ fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
             tmax: ray.tmax,
         }
     };
+    // Packets of 8 (the case's rays in order; `intersect8`, `occluded8` and their masked forms):
+    // any hits as one call per ray; closest hits whenever one call per ray finds one, with its
+    // `t` up to a near tie (the packet visits instances in another order, and a closer hit
+    // known earlier can cull one within rounding of it, see `check_tlas`' masked check).
+    for (c, chunk) in case.rays.chunks(8).enumerate() {
+        for ray_mask in [u32::MAX, 0b01] {
+            let (mut hits, mut occ) = ([None; 8], [false; 8]);
+            tlas.intersect8_masked::<Watertight, _, 8>(blases, chunk, ray_mask, &mut hits);
+            tlas.occluded8_masked::<Watertight, _, 8>(blases, chunk, ray_mask, &mut occ);
+            for (l, ray) in chunk.iter().enumerate() {
+                let one = tlas.intersect_masked::<Watertight, _, 8>(blases, ray, ray_mask);
+                let what = format!("tlas packet {c} lane {l} mask {ray_mask:#b}");
+                assert_eq!(
+                    occ[l],
+                    tlas.occluded_masked::<Watertight, _, 8>(blases, ray, ray_mask),
+                    "{what}: occluded"
+                );
+                match (hits[l], one) {
+                    (None, None) => {}
+                    (Some(p), Some(o)) => {
+                        assert!(
+                            p.hit.t == o.hit.t || near_tie(ray, p.hit, o.hit) || near_tie(ray, o.hit, p.hit),
+                            "{what}: {p:?} against {o:?}"
+                        );
+                        assert!(
+                            p.instance < 3 && MASKS[p.instance as usize] & ray_mask != 0,
+                            "{what}: {p:?} hidden"
+                        );
+                    }
+                    (p, o) => panic!("{what}: {p:?} against {o:?}"),
+                }
+            }
+        }
+    }
     for (i, ray) in case.rays.iter().enumerate() {
         let got = tlas.intersect::<Watertight, _, 8>(blases, ray);
         let occ = tlas.occluded::<Watertight, _, 8>(blases, ray);

@@ -4,9 +4,13 @@ use crate::build::{BuildError, BuildParams, Bvh2, usable_box};
 use crate::geometry::{Aabb, Hit, Ray};
 use crate::intersect::AabbLanes;
 use crate::layout::{BvhWide, EMPTY_CHILD, LEAF_BIT};
-use crate::math::{Lane, f32x4};
+use crate::math::{Lane, f32x4, f32x8};
+use crate::traverse::packet::BoxPacket;
+use crate::traverse::packet::stack::{Entry, MaskStack};
 use crate::traverse::stack::Stack;
-use crate::traverse::{AcceptAll, HitFilter, STACK_SIZE, TriangleTest, beyond, node_lanes, prepare, wide};
+use crate::traverse::{
+    AcceptAll, Conservative, HitFilter, STACK_SIZE, TriangleTest, beyond, node_lanes, packet, prepare, wide,
+};
 use alloc::vec;
 use alloc::vec::Vec;
 use glam::{Affine3A, Vec3, Vec3A};
@@ -126,6 +130,10 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 ///   from the camera or casting no shadow. Each node slot holds the union (bitwise or) of the
 ///   masks below it, so a subtree no instance of which the ray can see is not entered (its
 ///   slot's box is tested with its siblings', none inside it). [`set_mask`](Tlas::set_mask) changes an instance's mask without a rebuild.
+/// - **Packets** ([`intersect8`](Tlas::intersect8), [`occluded8`](Tlas::occluded8), and the
+///   batch forms for coherent groups of 8, such as a camera's 4 x 2 tiles): the rays walk the
+///   TLAS together (one interval test per node where they share direction signs) and each
+///   instance's BLAS as one packet, with the single-ray answers (the same `t`).
 /// - **Ties**: where two instances are hit at exactly the same `t`, the one found first wins
 ///   (the TLAS's near-to-far order); within one BLAS, the wide traversal's rule.
 /// - **Accuracy**: hits are those of a trace of the object-space ray through each instance's BLAS
@@ -694,7 +702,10 @@ impl Tlas {
     }
 
     /// [`intersect`](Self::intersect) for every ray of a batch: `hits[i]` for `rays[i]` (the
-    /// shorter length wins).
+    /// shorter length wins). Groups of 8 consecutive rays with the same direction signs and
+    /// origins close together (a camera tile, as [`wide::intersect_batch`] decides) go as one
+    /// packet ([`intersect8`](Self::intersect8)), the others one call per ray: the same `t` as
+    /// [`intersect`](Self::intersect), the same instance and primitive unless two tie there.
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
@@ -716,13 +727,23 @@ impl Tlas {
         rays: &[Ray],
         hits: &mut [Option<InstanceHit>],
     ) {
-        for (r, h) in rays.iter().zip(hits.iter_mut()) {
-            *h = self.intersect::<T, L, N>(blases, r);
-        }
+        wide::by_groups::<T, _>(
+            rays,
+            hits,
+            self.extent(),
+            |r, h| self.intersect8::<T, L, N>(blases, r, h),
+            |r| self.intersect::<T, L, N>(blases, r),
+            |r, h| {
+                for (r, h) in r.iter().zip(h.iter_mut()) {
+                    *h = self.intersect::<T, L, N>(blases, r);
+                }
+            },
+        );
     }
 
     /// [`occluded`](Self::occluded) for every ray of a batch: `out[i]` for `rays[i]` (the
-    /// shorter length wins).
+    /// shorter length wins); coherent groups of 8 as packets ([`occluded8`](Self::occluded8)),
+    /// the same answers.
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
@@ -741,9 +762,18 @@ impl Tlas {
         rays: &[Ray],
         out: &mut [bool],
     ) {
-        for (r, o) in rays.iter().zip(out.iter_mut()) {
-            *o = self.occluded::<T, L, N>(blases, r);
-        }
+        wide::by_groups::<T, _>(
+            rays,
+            out,
+            self.extent(),
+            |r, o| self.occluded8::<T, L, N>(blases, r, o),
+            |r| self.occluded::<T, L, N>(blases, r),
+            |r, o| {
+                for (r, o) in r.iter().zip(o.iter_mut()) {
+                    *o = self.occluded::<T, L, N>(blases, r);
+                }
+            },
+        );
     }
 
     /// [`intersect_batch`](Self::intersect_batch) on `threads` threads (`std`; chunks of 1024
@@ -799,6 +829,147 @@ impl Tlas {
         threads: usize,
     ) {
         wide::par_chunks(rays, out, threads, |r, o| self.occluded_batch::<T, L, N>(blases, r, o));
+    }
+
+    /// Closest hits of up to 8 rays as one packet: `hits[i]` for `rays[i]` (the shorter length
+    /// wins, at most 8). The rays walk the TLAS together, each node's boxes tested against every
+    /// lane that entered it; at each instance the lanes that reach it are taken into object
+    /// space and traced through its BLAS as one packet ([`packet::intersect_packet`]: interval
+    /// culling where the lanes are coherent, as a camera tile stays under any affine
+    /// transform; single rays where they diverge). Each answer has the `t` of
+    /// [`intersect`](Self::intersect), and its instance and primitive unless two tie at that
+    /// `t` (the packet visits instances in another order). Boxes are tested conservatively
+    /// whatever `T` asks for, as the packets do.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// use strahl::glam::Affine3A;
+    /// let tris = strahl::scene::icosphere(3).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let row: Vec<Instance> = (0..4)
+    ///     .map(|i| Instance::new(Affine3A::from_translation(Vec3::new(3.0 * i as f32, 0.0, 0.0)), 0))
+    ///     .collect();
+    /// let tlas = Tlas::build(&row, &blases).unwrap();
+    /// // A 4 x 2 tile of camera rays towards the second sphere.
+    /// let eye = Vec3::new(3.0, 0.0, -6.0);
+    /// let rays: Vec<Ray> = (0..8)
+    ///     .map(|i| Ray::new(eye, Vec3::new((i % 4) as f32 * 0.01, (i / 4) as f32 * 0.01, 1.0)))
+    ///     .collect();
+    /// let mut hits = [None; 8];
+    /// tlas.intersect8::<Moller, _, 8>(&blases, &rays, &mut hits);
+    /// for (r, h) in rays.iter().zip(hits) {
+    ///     assert_eq!(h, tlas.intersect::<Moller, _, 8>(&blases, r));
+    ///     assert_eq!(h.unwrap().instance, 1);
+    /// }
+    /// ```
+    pub fn intersect8<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        hits: &mut [Option<InstanceHit>],
+    ) {
+        self.intersect8_masked::<T, L, N>(blases, rays, u32::MAX, hits);
+    }
+
+    /// [`intersect8`](Self::intersect8) seeing only the instances whose
+    /// [`mask`](Instance::mask) shares a bit with `ray_mask` (as
+    /// [`intersect_masked`](Self::intersect_masked), one mask for the packet).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// use strahl::glam::Affine3A;
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let at = |z: f32| Affine3A::from_translation(Vec3::new(0.0, 0.0, z));
+    /// let tlas = Tlas::build(&[Instance::new(at(5.0), 0).with_mask(1), Instance::new(at(10.0), 0).with_mask(2)], &blases).unwrap();
+    /// let rays: Vec<Ray> = (0..8).map(|i| Ray::new(Vec3::new(0.01 * i as f32, 0.1, 0.0), Vec3::Z)).collect();
+    /// let mut hits = [None; 8];
+    /// tlas.intersect8_masked::<Moller, _, 8>(&blases, &rays, 2, &mut hits);
+    /// assert!(hits.iter().all(|h| h.unwrap().instance == 1)); // the nearer sphere is hidden
+    /// ```
+    pub fn intersect8_masked<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        ray_mask: u32,
+        hits: &mut [Option<InstanceHit>],
+    ) {
+        let n = rays.len().min(hits.len()).min(PACKET);
+        let (best, _) = self.walk_packet::<T, L, N, false>(blases, &rays[..n], ray_mask);
+        hits[..n].copy_from_slice(&best[..n]);
+    }
+
+    /// Any-hit answers of up to 8 rays as one packet: `out[i]` for `rays[i]` (the shorter length
+    /// wins, at most 8), the answers of [`occluded`](Self::occluded); lanes retire as they are
+    /// blocked. See [`intersect8`](Self::intersect8).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let tlas = Tlas::build(&[Instance::new(strahl::glam::Affine3A::IDENTITY, 0)], &blases).unwrap();
+    /// // Shadow rays from a patch below the sphere: blocked up to a light above it, not short of it.
+    /// let rays: Vec<Ray> = (0..8)
+    ///     .map(|i| Ray::with_range(Vec3::new(0.01 * i as f32, 0.0, -3.0), Vec3::Z, 0.0, if i < 4 { 6.0 } else { 1.5 }))
+    ///     .collect();
+    /// let mut out = [false; 8];
+    /// tlas.occluded8::<Moller, _, 8>(&blases, &rays, &mut out);
+    /// assert_eq!(out, [true, true, true, true, false, false, false, false]);
+    /// ```
+    pub fn occluded8<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        out: &mut [bool],
+    ) {
+        self.occluded8_masked::<T, L, N>(blases, rays, u32::MAX, out);
+    }
+
+    /// [`occluded8`](Self::occluded8) seeing only the instances whose [`mask`](Instance::mask)
+    /// shares a bit with `ray_mask`.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let glass = Instance::new(strahl::glam::Affine3A::IDENTITY, 0).with_mask(0b01);
+    /// let tlas = Tlas::build(&[glass], &blases).unwrap();
+    /// let rays = [Ray::with_range(Vec3::new(0.1, 0.2, -3.0), Vec3::Z, 0.0, 10.0); 8];
+    /// let mut out = [true; 8];
+    /// tlas.occluded8_masked::<Moller, _, 8>(&blases, &rays, 0b10, &mut out);
+    /// assert_eq!(out, [false; 8]); // glass casts no shadow
+    /// ```
+    pub fn occluded8_masked<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        ray_mask: u32,
+        out: &mut [bool],
+    ) {
+        let n = rays.len().min(out.len()).min(PACKET);
+        let (_, blocked) = self.walk_packet::<T, L, N, true>(blases, &rays[..n], ray_mask);
+        for (i, o) in out[..n].iter_mut().enumerate() {
+            *o = blocked >> i & 1 != 0;
+        }
+    }
+
+    /// The largest extent of the TLAS's root box (0 for an empty TLAS): the scale of the batch
+    /// forms' coherence test.
+    fn extent(&self) -> f32 {
+        let Some(root) = self.nodes.first() else {
+            return 0.0;
+        };
+        let mut e = 0f32;
+        for a in 0..3 {
+            // Empty slots hold the empty box (+inf min, -inf max), which the reductions skip.
+            let (lo, hi) = (root.bounds.min[a].min_lane(), root.bounds.max[a].max_lane());
+            e = e.max(hi - lo);
+        }
+        e
     }
 
     /// The hit of `ray` (world space, with `tmax` the closest hit so far) in instance `i`.
@@ -939,6 +1110,165 @@ impl Tlas {
                 };
                 if !beyond::<T>(near, r.tmax) {
                     cur = c;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// Lanes of a TLAS packet ([`Tlas::intersect8`]).
+const PACKET: usize = 8;
+
+/// A ray that hits nothing: the inactive lanes of a packet.
+const NO_RAY: Ray = Ray {
+    origin: Vec3::ZERO,
+    tmin: 0.0,
+    direction: Vec3::ZERO,
+    tmax: 0.0,
+};
+
+impl Tlas {
+    /// The TLAS walk of up to [`PACKET`] rays ([`BoxPacket`]): where the lanes share direction
+    /// signs, each node's four boxes culled with the packet's interval and an instance's box
+    /// with each lane's slab test (the conservative one), else every box with each lane's; the
+    /// children some lane enters visited nearest first (by a distance no larger than any of its
+    /// lanes'), each with the mask of those lanes; at an instance, those lanes still open go
+    /// through its BLAS as one packet, with their `tmax` the closest hit so far. Slots whose mask shares no bit with
+    /// `ray_mask` are not entered (all ones: only instances of mask `0` are hidden, as in the
+    /// single-ray walk). Returns the closest hits (`ANY`: none) and the mask of blocked lanes
+    /// (`ANY` only).
+    #[inline(always)]
+    fn walk_packet<T: TriangleTest, L: Lane, const N: usize, const ANY: bool>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        rays: &[Ray],
+        ray_mask: u32,
+    ) -> ([Option<InstanceHit>; PACKET], u32) {
+        let mut best = [None; PACKET];
+        let mut p = BoxPacket::new(rays);
+        if p.active() == 0 || self.nodes.is_empty() {
+            return (best, 0);
+        }
+        let mut blocked = 0u32;
+        // As in the single-ray walk: at most `3 (d - 1) + 1` entries for a tree of depth `d`.
+        let mut stack = MaskStack::<{ 3 * STACK_SIZE + 1 }>::new();
+        let (mut cur, mut lanes) = (0u32, p.active());
+        loop {
+            if cur & LEAF_BIT == 0 {
+                if let Some(node) = self.nodes.get(cur as usize) {
+                    let mut leaves = 0u32;
+                    for (s, &c) in node.child.iter().enumerate() {
+                        leaves |= u32::from(c & LEAF_BIT != 0) << s;
+                    }
+                    let (hit_by, near) = p.children(&node.bounds, lanes, leaves);
+                    let base = stack.len();
+                    for s in 0..4 {
+                        if hit_by[s] != 0 && node.mask[s] & ray_mask != 0 {
+                            // Any hit: slot order (equal distances keep the order of pushing
+                            // reversed, the lowest slot on top), as the single-ray walk.
+                            let e = Entry {
+                                code: node.child[s],
+                                dist: if ANY { 0.0 } else { near[s] },
+                                mask: hit_by[s],
+                            };
+                            let pushed = stack.push_sorted(base, e);
+                            debug_assert!(pushed, "the builder bounds the TLAS's depth");
+                        }
+                    }
+                }
+            } else if cur != EMPTY_CHILD {
+                let i = cur & !LEAF_BIT;
+                let open = lanes & p.active();
+                if open != 0
+                    && self.masks.get(i as usize).is_some_and(|&m| m & ray_mask != 0)
+                    && let Some(inv) = self.inverse.get(i as usize)
+                    && let Some(blas) = self.blas.get(i as usize).and_then(|&b| blases.get(b as usize))
+                {
+                    let mut local = [NO_RAY; PACKET];
+                    let mut m = open;
+                    let mut pad = None;
+                    while m != 0 {
+                        let l = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let ray = &rays[l];
+                        local[l] = Ray {
+                            origin: inv.transform_point3(ray.origin),
+                            tmin: ray.tmin,
+                            direction: inv.transform_vector3(ray.direction),
+                            tmax: p.tmax(l),
+                        };
+                        pad = pad.or(Some(local[l]));
+                    }
+                    // The other lanes: an open lane's ray with an empty range (inactive), not a
+                    // zero direction, whose signs would make the BLAS packet take its lanes for
+                    // incoherent and trace them as single rays.
+                    if let Some(r) = pad {
+                        let empty = Ray {
+                            tmax: f32::NEG_INFINITY,
+                            ..r
+                        };
+                        for (l, x) in local.iter_mut().enumerate() {
+                            if open >> l & 1 == 0 {
+                                *x = empty;
+                            }
+                        }
+                    }
+                    if ANY {
+                        let mut out = [false; PACKET];
+                        packet::occluded_packet::<T, L, N, f32x8, PACKET>(
+                            blas.view(),
+                            &local,
+                            &mut out,
+                            packet::DEFAULT_SWITCH,
+                        );
+                        let mut now = 0u32;
+                        for (l, &o) in out.iter().enumerate() {
+                            now |= u32::from(o) << l;
+                        }
+                        if now != 0 {
+                            blocked |= now;
+                            p.retire(now);
+                            if p.active() == 0 {
+                                return (best, blocked);
+                            }
+                        }
+                    } else {
+                        let mut hits = [None; PACKET];
+                        packet::intersect_packet::<T, L, N, f32x8, PACKET>(
+                            blas.view(),
+                            &local,
+                            &mut hits,
+                            packet::DEFAULT_SWITCH,
+                        );
+                        let (mut closer, mut t) = (0u32, [0f32; PACKET]);
+                        for (l, h) in hits.iter().enumerate() {
+                            if let Some(h) = *h {
+                                best[l] = Some(InstanceHit { hit: h, instance: i });
+                                closer |= 1 << l;
+                                t[l] = h.t;
+                            }
+                        }
+                        if closer != 0 {
+                            p.set_tmax(closer, &t);
+                        }
+                    }
+                }
+            }
+            // The next entry that some open lane can still reach.
+            loop {
+                let Some(e) = stack.pop() else {
+                    return (best, blocked);
+                };
+                let mut keep = 0u32;
+                let mut m = e.mask & p.active();
+                while m != 0 {
+                    let l = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    keep |= u32::from(!beyond::<Conservative<T>>(e.dist, p.tmax(l))) << l;
+                }
+                if keep != 0 {
+                    (cur, lanes) = (e.code, keep);
                     break;
                 }
             }

@@ -425,7 +425,7 @@ pub fn intersect_batch_ordered<T: TriangleTest, L: Lane, const N: usize>(
 
 /// How [`intersect_batch`] and [`occluded_batch`] trace a group of up to 8 consecutive rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Group {
+pub(crate) enum Group {
     /// The same direction signs and origins close together (a camera tile, shadow rays from a
     /// tile's hits to a light): one packet of 8 ([`packet`](super::packet), interval culling).
     Packet,
@@ -459,7 +459,7 @@ pub(crate) fn root_extent<L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>) ->
 /// answers exactly as one call per ray). Only speed depends on the answer (NaN origins do not
 /// count in the spread).
 #[inline(always)]
-fn group<T: TriangleTest>(rays: &[Ray], extent: f32) -> Group {
+pub(crate) fn group<T: TriangleTest>(rays: &[Ray], extent: f32) -> Group {
     let first = rays[0];
     let signs = first.direction.is_negative_bitmask();
     let (mut lo, mut hi, mut same) = (first.origin, first.origin, true);
@@ -481,7 +481,7 @@ fn group<T: TriangleTest>(rays: &[Ray], extent: f32) -> Group {
 /// Runs a batch group by group ([`Group`]): `packet(rays, out)` on a packet's 8 rays,
 /// `single(ray)` one by one, `scattered(rays, out)` on each maximal run of scattered groups.
 #[inline(always)]
-fn by_groups<T: TriangleTest, O>(
+pub(crate) fn by_groups<T: TriangleTest, O>(
     rays: &[Ray],
     out: &mut [O],
     extent: f32,

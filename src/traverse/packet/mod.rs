@@ -50,9 +50,11 @@
 
 mod bvh2;
 mod leaf;
-mod stack;
+pub(crate) mod stack;
 mod tile;
 mod wide;
+
+pub(crate) use wide::BoxPacket;
 
 /// Sixteen `f32` lanes (`wide`'s type): one AVX-512 register, or two [`f32x8`] halves.
 pub use crate::math::f32x16;

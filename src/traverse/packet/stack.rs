@@ -7,14 +7,14 @@ use core::mem::MaybeUninit;
 /// A node still to visit: its code, the nearest entry distance of the lanes that hit its box, and
 /// the mask of those lanes.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Entry {
-    pub(super) code: u32,
-    pub(super) dist: f32,
-    pub(super) mask: u32,
+pub(crate) struct Entry {
+    pub(crate) code: u32,
+    pub(crate) dist: f32,
+    pub(crate) mask: u32,
 }
 
 /// A stack of [`Entry`] with room for `S`.
-pub(super) struct MaskStack<const S: usize> {
+pub(crate) struct MaskStack<const S: usize> {
     entries: [MaybeUninit<Entry>; S],
     len: usize,
 }
@@ -22,7 +22,7 @@ pub(super) struct MaskStack<const S: usize> {
 impl<const S: usize> MaskStack<S> {
     /// An empty stack (nothing is written).
     #[inline(always)]
-    pub(super) fn new() -> Self {
+    pub(crate) fn new() -> Self {
         Self {
             entries: [const { MaybeUninit::uninit() }; S],
             len: 0,
@@ -31,14 +31,14 @@ impl<const S: usize> MaskStack<S> {
 
     /// Entries on the stack.
     #[inline(always)]
-    pub(super) fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.len
     }
 
     /// Pushes `e` keeping the entries above `base` sorted by decreasing distance (the nearest on
     /// top; an equal distance goes below those already there). Returns `false` when full.
     #[inline(always)]
-    pub(super) fn push_sorted(&mut self, base: usize, e: Entry) -> bool {
+    pub(crate) fn push_sorted(&mut self, base: usize, e: Entry) -> bool {
         if self.len >= S {
             return false;
         }
@@ -62,7 +62,7 @@ impl<const S: usize> MaskStack<S> {
 
     /// Pops the top entry.
     #[inline(always)]
-    pub(super) fn pop(&mut self) -> Option<Entry> {
+    pub(crate) fn pop(&mut self) -> Option<Entry> {
         if self.len == 0 {
             return None;
         }

@@ -206,6 +206,33 @@ pub(super) fn root_lanes<L: Lane, const N: usize, R: Lane, const K: usize>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[Ray],
 ) -> (u32, Slabs<R>) {
+    let (valid, lanes) = lanes_of::<R, K>(rays);
+    let (tmin, tmax) = (lanes.tmin, lanes.tmax);
+    let Some(root) = bvh.nodes.first() else {
+        return (0, lanes);
+    };
+    let (mut lo, mut hi) = ([[0f32; N]; 3], [[0f32; N]; 3]);
+    for a in 0..3 {
+        root.bounds.min[a].store(&mut lo[a]);
+        root.bounds.max[a].store(&mut hi[a]);
+    }
+    let mut enter = 0u32;
+    for (c, &child) in root.child.iter().enumerate() {
+        if child != EMPTY_CHILD {
+            let b = |v: &[[f32; N]; 3]| [v[0][c], v[1][c], v[2][c]];
+            enter |= box_slabs(&lanes.origin, &lanes.inv_dir, tmin, tmax, &lanes.neg, b(&lo), b(&hi)).1;
+        }
+    }
+    (
+        enter & valid.bitmask() & ((1u64 << rays.len().min(K)) - 1) as u32,
+        lanes,
+    )
+}
+
+/// The lanes of up to `K` rays as single-ray traversal prepares them, and the mask of valid
+/// lanes (as a lane mask): the first half of [`root_lanes`].
+#[inline(always)]
+fn lanes_of<R: Lane, const K: usize>(rays: &[Ray]) -> (R, Slabs<R>) {
     // Rays to lanes, transposed in registers; lanes past `rays` are invalid (a NaN origin).
     let [ox, oy, oz, tmin, dx, dy, dz, tmax] = ray_lanes::<R, K>(rays);
     let (origin, raw) = ([ox, oy, oz], [dx, dy, dz]);
@@ -231,33 +258,163 @@ pub(super) fn root_lanes<L: Lane, const N: usize, R: Lane, const K: usize>(
     let (tmin, tmax) = (valid.select(tmin, inf), valid.select(tmax, R::splat(f32::NEG_INFINITY)));
     // Full lane masks of the reciprocal's sign (what `neg` holds); invalid lanes miss anyway.
     let neg = inv.map(|v| v.lt(zero));
-    let lanes = Slabs {
-        origin,
-        direction: flushed,
-        inv_dir: inv,
-        tmin,
-        tmax,
-        neg,
-    };
-    let Some(root) = bvh.nodes.first() else {
-        return (0, lanes);
-    };
-    let (mut lo, mut hi) = ([[0f32; N]; 3], [[0f32; N]; 3]);
-    for a in 0..3 {
-        root.bounds.min[a].store(&mut lo[a]);
-        root.bounds.max[a].store(&mut hi[a]);
+    (
+        valid,
+        Slabs {
+            origin,
+            direction: flushed,
+            inv_dir: inv,
+            tmin,
+            tmax,
+            neg,
+        },
+    )
+}
+
+/// A packet of up to 8 rays walking a 4-wide tree of boxes (the instances' TLAS): its lanes as
+/// single-ray traversal prepares them, each lane's current `tmax`, and, where every active lane
+/// has the same direction signs, the packet's bounding interval, so that a node's four boxes are
+/// culled with one interval test for the whole packet (Wald, Boulos and Shirley 2007) instead of
+/// one slab test per lane.
+pub(crate) struct BoxPacket {
+    p: Slabs<crate::math::f32x8>,
+    active: u32,
+    /// `Some` where the active lanes share direction signs: the interval, its sign per axis
+    /// and where a reciprocal is infinite (see [`product_lo`]).
+    iv: Option<(Interval, [bool; 3], [bool; 3])>,
+}
+
+impl BoxPacket {
+    /// The packet of `rays` (at most 8; lanes past them, and invalid rays, are inactive).
+    #[inline(always)]
+    pub(crate) fn new(rays: &[Ray]) -> Self {
+        let (_, p) = lanes_of::<crate::math::f32x8, 8>(rays);
+        let active = p.active() & ((1u32 << rays.len().min(8)) - 1);
+        let mut b = Self { p, active, iv: None };
+        if active != 0 {
+            let first = active.trailing_zeros();
+            let mut same = true;
+            for n in &b.p.neg {
+                let m = n.bitmask() & active;
+                same &= m == 0 || m == active;
+            }
+            if same {
+                let iv = Interval::new(&b.p, active);
+                let neg = b.p.neg.map(|n| n.bitmask() >> first & 1 != 0);
+                let guard = iv.inv.map(|(b0, b1)| b0.is_infinite() || b1.is_infinite());
+                b.iv = Some((iv, neg, guard));
+            }
+        }
+        b
     }
-    let mut enter = 0u32;
-    for (c, &child) in root.child.iter().enumerate() {
-        if child != EMPTY_CHILD {
-            let b = |v: &[[f32; N]; 3]| [v[0][c], v[1][c], v[2][c]];
-            enter |= box_slabs(&lanes.origin, &lanes.inv_dir, tmin, tmax, &lanes.neg, b(&lo), b(&hi)).1;
+
+    /// The lanes still open: with a ray, not retired.
+    #[inline(always)]
+    pub(crate) fn active(&self) -> u32 {
+        self.active
+    }
+
+    /// Lane `l`'s `tmax` (its closest hit so far).
+    #[inline(always)]
+    pub(crate) fn tmax(&self, l: usize) -> f32 {
+        self.p.tmax.at(l)
+    }
+
+    /// Sets the `tmax` of the lanes of `lanes` to `t` (a closer hit found).
+    #[inline(always)]
+    pub(crate) fn set_tmax(&mut self, lanes: u32, t: &[f32; 8]) {
+        use crate::math::f32x8;
+        self.p.tmax = f32x8::from_bitmask(lanes).select(f32x8::load(t), self.p.tmax);
+        self.refresh();
+    }
+
+    /// Retires the lanes of `lanes` (answered: blocked).
+    #[inline(always)]
+    pub(crate) fn retire(&mut self, lanes: u32) {
+        self.active &= !lanes;
+        self.refresh();
+    }
+
+    /// The interval's `tmax` after a lane's changed.
+    #[inline(always)]
+    fn refresh(&mut self) {
+        use crate::math::f32x8;
+        if let Some((iv, _, _)) = self.iv.as_mut() {
+            iv.tmax = f32x8::from_bitmask(self.active)
+                .select(self.p.tmax, f32x8::splat(f32::NEG_INFINITY))
+                .max_lane();
         }
     }
-    (
-        enter & valid.bitmask() & ((1u64 << rays.len().min(K)) - 1) as u32,
-        lanes,
-    )
+
+    /// A node's four child boxes against the lanes of `lanes`: per child, the lanes that may
+    /// enter it and a distance no larger than any of theirs. With the interval, every lane of
+    /// `lanes` for each inner child the interval enters (conservative: a superset of the lanes'
+    /// own slab tests), and for the children of `leaves` (bit per slot) that the interval
+    /// enters, each lane's single-ray slab test, so that a lane reaches a leaf exactly where its
+    /// own walk would; without the interval, each lane's slab test for every child.
+    #[inline(always)]
+    pub(crate) fn children(
+        &self,
+        b: &crate::intersect::AabbLanes<crate::math::f32x4>,
+        lanes: u32,
+        leaves: u32,
+    ) -> ([u32; 4], [f32; 4]) {
+        use crate::math::f32x4;
+        let mut masks = [0u32; 4];
+        let mut dist = [f32::INFINITY; 4];
+        if let Some((iv, neg, guard)) = &self.iv {
+            let slack = f32x4::splat(FAR_SLACK);
+            let mut near = f32x4::splat(iv.tmin);
+            let mut far = f32x4::splat(iv.tmax);
+            for a in 0..3 {
+                let (entry, exit) = if neg[a] {
+                    (b.max[a], b.min[a])
+                } else {
+                    (b.min[a], b.max[a])
+                };
+                let (o0, o1) = (f32x4::splat(iv.o[a].0), f32x4::splat(iv.o[a].1));
+                let (b0, b1) = iv.inv[a];
+                near = product_lo(entry - o1, entry - o0, b0, b1, guard[a]).max_l(near);
+                far = product_hi(exit - o1, exit - o0, b0, b1, guard[a]).min_l(far);
+            }
+            let lo = near - near.abs() * slack;
+            let hit = lo.le(far + far.abs() * slack).bitmask() & 0xf;
+            lo.store(&mut dist);
+            for (c, m) in masks.iter_mut().enumerate() {
+                if hit >> c & 1 != 0 {
+                    *m = lanes;
+                }
+            }
+            if hit & leaves == 0 {
+                return (masks, dist);
+            }
+        }
+        let (mut lo, mut hi) = ([[0f32; 4]; 3], [[0f32; 4]; 3]);
+        for a in 0..3 {
+            b.min[a].store(&mut lo[a]);
+            b.max[a].store(&mut hi[a]);
+        }
+        for c in 0..4 {
+            if self.iv.is_some() && (masks[c] == 0 || leaves >> c & 1 == 0) {
+                continue;
+            }
+            let at = |v: &[[f32; 4]; 3]| [v[0][c], v[1][c], v[2][c]];
+            let (near, m) = box_slabs(
+                &self.p.origin,
+                &self.p.inv_dir,
+                self.p.tmin,
+                self.p.tmax,
+                &self.p.neg,
+                at(&lo),
+                at(&hi),
+            );
+            masks[c] = m & lanes;
+            if masks[c] != 0 {
+                dist[c] = hit_min::<crate::math::f32x8, 8>(near, masks[c]);
+            }
+        }
+        (masks, dist)
+    }
 }
 
 /// `true` if the hybrid will send these rays to single-ray traversal at the root whatever they
