@@ -392,6 +392,27 @@ fn bad_instances_are_left_out() {
         None
     );
     assert_eq!(tlas.intersect::<Watertight, _, 8>(&b8[..1], &from_left), None);
+    // Packets: rays along x through the good instance and past the left-out ones, as single
+    // rays; over the shorter BLAS slice and the TLAS of bad instances, nothing.
+    let row: Vec<Ray> = (0..8)
+        .map(|i| Ray::new(Vec3::new(-10.0, 0.01 * i as f32, 0.02), Vec3::X))
+        .collect();
+    let mut h = [None; 8];
+    tlas.intersect8::<Watertight, _, 8>(&b8, &row, &mut h);
+    for (r, h) in row.iter().zip(h) {
+        assert_eq!(h, tlas.intersect::<Watertight, _, 8>(&b8, r));
+        assert_eq!(h.map(|h| h.instance), Some(0));
+    }
+    for (t, blases) in [(&tlas, &b8[..1]), (&none, &b8[..])] {
+        let mut h = [Some(InstanceHit {
+            hit: Hit::NONE,
+            instance: 9,
+        }); 8];
+        let mut o = [true; 8];
+        t.intersect8::<Watertight, _, 8>(blases, &row, &mut h);
+        t.occluded8::<Watertight, _, 8>(blases, &row, &mut o);
+        assert_eq!((h, o), ([None; 8], [false; 8]));
+    }
     // Bad rays, with and without a filter.
     for r in rays(0, &all, 1.0, 9) {
         assert_eq!(tlas.intersect::<Watertight, _, 8>(&b8, &r), None, "{r:?}");
@@ -650,7 +671,14 @@ fn packets_answer_as_single_rays() {
         32,
     ));
     let scattered = rays(300, &inst, spread, 52);
-    let mut packets: Vec<&[Ray]> = cam.chunks(8).collect();
+    // Camera tiles whose ranges lie behind their origins (`t` in `[-60, -1)` from a point past
+    // the instances): the same coherent packets, negative `tmax` (the fuzz target found the
+    // any-hit walk dropping such lanes).
+    let behind: Vec<Ray> = cam[..cam.len() / 2]
+        .iter()
+        .map(|r| Ray::with_range(r.origin + r.direction * 60.0, r.direction, -60.0, -1.0))
+        .collect();
+    let mut packets: Vec<&[Ray]> = cam.chunks(8).chain(behind.chunks(8)).collect();
     let (mut at, mut len) = (0, 1);
     while at < scattered.len() {
         let end = (at + len).min(scattered.len());
@@ -662,8 +690,13 @@ fn packets_answer_as_single_rays() {
     for ray_mask in [u32::MAX, 0b01, 0b10] {
         let sees = |i: u32| inst[i as usize].mask & ray_mask != 0;
         for p in &packets {
-            let (mut h8, mut h4) = ([None; 8], [None; 8]);
-            let (mut o8, mut o4) = ([false; 8], [false; 8]);
+            // Sentinels, so that lanes past the packet are seen to be left alone.
+            let sentinel = Some(InstanceHit {
+                hit: Hit::NONE,
+                instance: 999,
+            });
+            let (mut h8, mut h4) = ([sentinel; 8], [sentinel; 8]);
+            let (mut o8, mut o4) = ([true; 8], [true; 8]);
             if ray_mask == u32::MAX {
                 tlas8.intersect8::<Moller, _, 8>(&b8, p, &mut h8);
                 tlas4.intersect8::<Moller, _, 4>(&b4, p, &mut h4);
@@ -676,7 +709,7 @@ fn packets_answer_as_single_rays() {
                 tlas4.occluded8_masked::<Moller, _, 4>(&b4, p, ray_mask, &mut o4);
             }
             // Lanes past the packet are left alone.
-            assert!(h8[p.len()..].iter().all(Option::is_none) && !o8[p.len()..].iter().any(|&o| o));
+            assert!(h8[p.len()..].iter().all(|&h| h == sentinel) && o8[p.len()..].iter().all(|&o| o));
             for (l, ray) in p.iter().enumerate() {
                 let want8 = tlas8.intersect_masked::<Moller, _, 8>(&b8, ray, ray_mask);
                 let want4 = tlas4.intersect_masked::<Moller, _, 4>(&b4, ray, ray_mask);
@@ -713,8 +746,11 @@ fn packets_answer_as_single_rays() {
             }
         }
     }
-    // Enough hits for the comparison to say something, and ties rare.
+    // Enough hits for the comparison to say something (the rays behind their origins too), and
+    // ties rare.
     assert!(hit_lanes > 5000, "{hit_lanes}");
+    let behind_hits = behind.iter().filter(|r| tlas8.occluded::<Moller, _, 8>(&b8, r)).count();
+    assert!(behind_hits > 500, "{behind_hits}");
     assert!(ties * 100 < hit_lanes, "{ties} ties");
     // The batch forms: the camera tiles go as packets.
     let single: Vec<Option<InstanceHit>> = cam.iter().map(|r| tlas8.intersect::<Moller, _, 8>(&b8, r)).collect();

@@ -133,7 +133,12 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 /// - **Packets** ([`intersect8`](Tlas::intersect8), [`occluded8`](Tlas::occluded8), and the
 ///   batch forms for coherent groups of 8, such as a camera's 4 x 2 tiles): the rays walk the
 ///   TLAS together (one interval test per node where they share direction signs) and each
-///   instance's BLAS as one packet, with the single-ray answers (the same `t`).
+///   instance's BLAS as one packet. Any hits are the single-ray answers; closest hits have the
+///   single-ray `t`, up to a near tie: visiting the instances in another order, a packet lane
+///   may cull a hit lying within rounding of a closer box entry (see
+///   [`TriangleTest::CONSERVATIVE_BOXES`](crate::traverse::TriangleTest::CONSERVATIVE_BOXES)).
+///   Packets test boxes conservatively whatever `T` asks for, so `Fast<T>` packets answer as
+///   single rays of `T` do.
 /// - **Ties**: where two instances are hit at exactly the same `t`, the one found first wins
 ///   (the TLAS's near-to-far order); within one BLAS, the wide traversal's rule.
 /// - **Accuracy**: hits are those of a trace of the object-space ray through each instance's BLAS
@@ -704,8 +709,9 @@ impl Tlas {
     /// [`intersect`](Self::intersect) for every ray of a batch: `hits[i]` for `rays[i]` (the
     /// shorter length wins). Groups of 8 consecutive rays with the same direction signs and
     /// origins close together (a camera tile, as [`wide::intersect_batch`] decides) go as one
-    /// packet ([`intersect8`](Self::intersect8)), the others one call per ray: the same `t` as
-    /// [`intersect`](Self::intersect), the same instance and primitive unless two tie there.
+    /// packet ([`intersect8`](Self::intersect8)), the others one call per ray: the `t` of
+    /// [`intersect`](Self::intersect) (up to a near tie in a packet, see [`Tlas`]), the same
+    /// instance and primitive unless two tie there. (`Fast<T>` batches send no packets.)
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
@@ -838,8 +844,9 @@ impl Tlas {
     /// culling where the lanes are coherent, as a camera tile stays under any affine
     /// transform; single rays where they diverge). Each answer has the `t` of
     /// [`intersect`](Self::intersect), and its instance and primitive unless two tie at that
-    /// `t` (the packet visits instances in another order). Boxes are tested conservatively
-    /// whatever `T` asks for, as the packets do.
+    /// `t`, up to a near tie (the packet visits instances in another order; see the
+    /// [`Tlas`] docs). Boxes are tested conservatively whatever `T` asks for, as the packets
+    /// do (for `Fast<T>`, the answers of [`intersect`](Self::intersect) with `T`).
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
@@ -1166,12 +1173,17 @@ impl Tlas {
                     for s in 0..4 {
                         if hit_by[s] != 0 && node.mask[s] & ray_mask != 0 {
                             // Any hit: slot order (equal distances keep the order of pushing
-                            // reversed, the lowest slot on top), as the single-ray walk.
+                            // reversed, the lowest slot on top), as the single-ray walk; `-inf`,
+                            // so that no lane is culled at the pop (an any-hit walk's `tmax`
+                            // never shrinks, and may be negative: a range behind the origin;
+                            // found by the `bvh` fuzz target with `0.0` here).
                             let e = Entry {
                                 code: node.child[s],
-                                dist: if ANY { 0.0 } else { near[s] },
+                                dist: if ANY { f32::NEG_INFINITY } else { near[s] },
                                 mask: hit_by[s],
                             };
+                            // NOTE: cannot fail: the builder bounds the TLAS's depth by
+                            // `STACK_SIZE` (as the single-ray walk relies on too).
                             let pushed = stack.push_sorted(base, e);
                             debug_assert!(pushed, "the builder bounds the TLAS's depth");
                         }
