@@ -992,13 +992,7 @@ impl Tlas {
     ) -> Option<Hit> {
         let inv = self.inverse.get(i as usize)?;
         let blas = blases.get(*self.blas.get(i as usize)? as usize)?;
-        let local = Ray {
-            origin: inv.transform_point3(ray.origin),
-            tmin: ray.tmin,
-            direction: inv.transform_vector3(ray.direction),
-            tmax,
-        };
-        let mut r = prepare::<T>(&local);
+        let mut r = prepare::<T>(&object_ray(inv, ray, tmax));
         if r.is_empty() || blas.nodes.is_empty() {
             return None;
         }
@@ -1127,13 +1121,17 @@ impl Tlas {
 /// Lanes of a TLAS packet ([`Tlas::intersect8`]).
 const PACKET: usize = 8;
 
-/// A ray that hits nothing: the inactive lanes of a packet.
-const NO_RAY: Ray = Ray {
-    origin: Vec3::ZERO,
-    tmin: 0.0,
-    direction: Vec3::ZERO,
-    tmax: 0.0,
-};
+/// World ray `ray` in an instance's object space (`inv`: world to object), with `tmax`: the
+/// parameterisation kept, so `t` is the same number in both spaces.
+#[inline(always)]
+fn object_ray(inv: &Affine3A, ray: &Ray, tmax: f32) -> Ray {
+    Ray {
+        origin: inv.transform_point3(ray.origin),
+        tmin: ray.tmin,
+        direction: inv.transform_vector3(ray.direction),
+        tmax,
+    }
+}
 
 impl Tlas {
     /// The TLAS walk of up to [`PACKET`] rays ([`BoxPacket`]): where the lanes share direction
@@ -1197,34 +1195,20 @@ impl Tlas {
                     && let Some(inv) = self.inverse.get(i as usize)
                     && let Some(blas) = self.blas.get(i as usize).and_then(|&b| blases.get(b as usize))
                 {
-                    let mut local = [NO_RAY; PACKET];
+                    // Lanes not open: the first open lane's ray with an empty range (inactive),
+                    // not a zero direction, whose signs would make the BLAS packet take its
+                    // lanes for incoherent and trace them as single rays.
+                    let first = open.trailing_zeros() as usize;
+                    let empty = Ray {
+                        tmax: f32::NEG_INFINITY,
+                        ..object_ray(inv, &rays[first], p.tmax(first))
+                    };
+                    let mut local = [empty; PACKET];
                     let mut m = open;
-                    let mut pad = None;
                     while m != 0 {
                         let l = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let ray = &rays[l];
-                        local[l] = Ray {
-                            origin: inv.transform_point3(ray.origin),
-                            tmin: ray.tmin,
-                            direction: inv.transform_vector3(ray.direction),
-                            tmax: p.tmax(l),
-                        };
-                        pad = pad.or(Some(local[l]));
-                    }
-                    // The other lanes: an open lane's ray with an empty range (inactive), not a
-                    // zero direction, whose signs would make the BLAS packet take its lanes for
-                    // incoherent and trace them as single rays.
-                    if let Some(r) = pad {
-                        let empty = Ray {
-                            tmax: f32::NEG_INFINITY,
-                            ..r
-                        };
-                        for (l, x) in local.iter_mut().enumerate() {
-                            if open >> l & 1 == 0 {
-                                *x = empty;
-                            }
-                        }
+                        local[l] = object_ray(inv, &rays[l], p.tmax(l));
                     }
                     if ANY {
                         let mut out = [false; PACKET];
