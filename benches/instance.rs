@@ -28,6 +28,14 @@
 //! through its instances (`rtcIntersect1M`, `embree_instances_1M`; its `rtcOccluded1M` through
 //! instances did not finish a criterion run here and is left out).
 //!
+//! Updates (`instance/*/update`, the two scenes and `crowd100k`: 100,000 instances of an
+//! 80-triangle icosphere): the next frame's placement of every instance (each moved by a tenth
+//! of the mesh's size and turned a little, two placements taking turns) by a rebuild of the TLAS
+//! (`tlas`: the full sweep; `tlas_fast`: `Tlas::build_with` and `BuildParams::fast()`), by
+//! `Tlas::refit` (`tlas_refit`), and by Embree's new transforms and commit of the top scene
+//! (`embree_commit_low` / `_medium`: the scene's build quality). The trees' SAH costs after the
+//! move are printed.
+//!
 //! `cargo bench --bench instance -- --noplot` (add `--features embree` for Embree)
 
 #[path = "common/mod.rs"]
@@ -68,6 +76,106 @@ fn grid(mesh: &[Triangle], k: usize, seed: u64) -> (Vec<Instance>, Vec<Triangle>
     (inst, world)
 }
 
+/// Embree's 3 x 4 column-major transforms of `inst`.
+#[cfg(feature = "embree")]
+fn embree_transforms(inst: &[Instance]) -> Vec<[f32; 12]> {
+    inst.iter()
+        .map(|x| {
+            let m = x.transform;
+            let c = |v: glam::Vec3A| [v.x, v.y, v.z];
+            let mut a = [0.0; 12];
+            a[0..3].copy_from_slice(&c(m.matrix3.x_axis));
+            a[3..6].copy_from_slice(&c(m.matrix3.y_axis));
+            a[6..9].copy_from_slice(&c(m.matrix3.z_axis));
+            a[9..12].copy_from_slice(&c(m.translation));
+            a
+        })
+        .collect()
+}
+
+/// `inst` moved for the next frame: each instance shifted by up to `step` on each axis and
+/// turned a little about y (the tree's shape, made for `inst`, still fits).
+fn moved(inst: &[Instance], step: f32, seed: u64) -> Vec<Instance> {
+    let mut rng = Rng::new(seed);
+    inst.iter()
+        .map(|x| {
+            let d = Vec3::new(rng.range(-step, step), rng.range(-step, step), rng.range(-step, step));
+            let turn = Affine3A::from_quat(Quat::from_rotation_y(rng.range(-0.2, 0.2)));
+            Instance {
+                transform: Affine3A::from_translation(d) * x.transform * turn,
+                ..*x
+            }
+        })
+        .collect()
+}
+
+/// The update of a scene's instances for the next frame, two placements taking turns: a
+/// rebuild of the TLAS (`tlas`), its refit (`tlas_refit`), and with `--features embree`
+/// Embree's new transforms and scene commit (its instance-level BVH rebuilt, at the top scene's
+/// quality).
+fn bench_update(c: &mut Criterion, group: &str, mesh: &[Triangle], inst: &[Instance], blases: &[Bvh8], step: f32) {
+    let next = moved(inst, step, 5);
+    let frames = [inst, &next[..]];
+    let mut g = c.benchmark_group(group);
+    g.sample_size(20);
+    g.throughput(Throughput::Elements(inst.len() as u64));
+    g.bench_function("tlas", |bch| {
+        let mut f = 0;
+        bch.iter(|| {
+            f ^= 1;
+            Tlas::build(black_box(frames[f]), blases).unwrap()
+        })
+    });
+    g.bench_function("tlas_fast", |bch| {
+        let mut f = 0;
+        bch.iter(|| {
+            f ^= 1;
+            Tlas::build_with(black_box(frames[f]), blases, &BuildParams::fast()).unwrap()
+        })
+    });
+    // The trees' SAH costs (C_T = C_I = 1) on the moved instances: rebuilt by the full sweep and
+    // by `fast()`, and refitted from the first placement.
+    let cost = |t: &Tlas| t.bvh().sah_cost(1.0, 1.0);
+    let mut refitted = Tlas::build(inst, blases).unwrap();
+    assert!(refitted.refit(&next, blases));
+    eprintln!(
+        "{group}: TLAS SAH cost after the move: rebuilt {:.2}, rebuilt by fast() {:.2}, refitted {:.2}",
+        cost(&Tlas::build(&next, blases).unwrap()),
+        cost(&Tlas::build_with(&next, blases, &BuildParams::fast()).unwrap()),
+        cost(&refitted)
+    );
+    let mut tlas = Tlas::build(inst, blases).unwrap();
+    g.bench_function("tlas_refit", |bch| {
+        let mut f = 0;
+        bch.iter(|| {
+            f ^= 1;
+            assert!(tlas.refit(black_box(frames[f]), blases));
+        })
+    });
+    #[cfg(feature = "embree")]
+    {
+        use peers::embree::{Device, InstanceScene, Quality};
+        let device = Device::single_threaded();
+        let xfms = [embree_transforms(inst), embree_transforms(&next)];
+        for (name, q) in [
+            ("embree_commit_low", Quality::Low),
+            ("embree_commit_medium", Quality::Medium),
+        ] {
+            let mut scene = InstanceScene::new(&device, mesh, &xfms[0], q);
+            g.bench_function(name, |bch| {
+                let mut f = 0;
+                bch.iter(|| {
+                    f ^= 1;
+                    scene.set_transforms(black_box(&xfms[f]));
+                })
+            });
+        }
+    }
+    #[cfg(not(feature = "embree"))]
+    let _ = mesh;
+    g.finish();
+}
+
 fn build_bvh8(tris: &[Triangle]) -> Bvh8 {
     let (b2, _) = Bvh2::build(tris, &BuildParams::default()).unwrap();
     Bvh8::from_bvh2(&b2, tris).unwrap()
@@ -99,19 +207,7 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
     let embree = {
         use peers::embree::{Device, InstanceScene, Quality, Scene};
         let device: &'static Device = Box::leak(Box::new(Device::single_threaded()));
-        let xfms: Vec<[f32; 12]> = inst
-            .iter()
-            .map(|x| {
-                let m = x.transform;
-                let c = |v: glam::Vec3A| [v.x, v.y, v.z];
-                let mut a = [0.0; 12];
-                a[0..3].copy_from_slice(&c(m.matrix3.x_axis));
-                a[3..6].copy_from_slice(&c(m.matrix3.y_axis));
-                a[6..9].copy_from_slice(&c(m.matrix3.z_axis));
-                a[9..12].copy_from_slice(&c(m.translation));
-                a
-            })
-            .collect();
+        let xfms = embree_transforms(&inst);
         (
             device,
             InstanceScene::new(device, &mesh, &xfms, Quality::Medium),
@@ -312,11 +408,30 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
         g.bench_function("flat_bvh8", |bch| bch.iter(|| build_bvh8(black_box(&world))));
         g.finish();
     }
+    let size = (bounds(&mesh).max - bounds(&mesh).min).max_element();
+    bench_update(c, &format!("instance/{name}/update"), &mesh, &inst, &blases, size * 0.1);
+}
+
+/// 100,000 instances of an 80-triangle icosphere at random places and turns in a cube of side
+/// 400 (about 8 diameters apart): the update of a crowd of moving objects.
+fn bench_crowd(c: &mut Criterion) {
+    let mesh = scene::icosphere(1).to_soup();
+    let blases = [build_bvh8(&mesh)];
+    let mut rng = Rng::new(9);
+    let inst: Vec<Instance> = (0..100_000)
+        .map(|_| {
+            let q = Quat::from_axis_angle(rng.unit_vector(), rng.range(0.0, std::f32::consts::TAU));
+            let t = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 400.0;
+            Instance::new(Affine3A::from_rotation_translation(q, t), 0)
+        })
+        .collect();
+    bench_update(c, "instance/crowd100k/update", &mesh, &inst, &blases, 0.2);
 }
 
 fn benches(c: &mut Criterion) {
     bench_scene(c, "bunnies", scene::bunny().to_soup(), 8, true);
     bench_scene(c, "spheres", scene::icosphere(3).to_soup(), 32, false);
+    bench_crowd(c);
 }
 
 criterion_group!(instance, benches);

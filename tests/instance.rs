@@ -763,3 +763,151 @@ fn packets_answer_as_single_rays() {
     tlas8.intersect8::<Moller, _, 8>(&b8, bad, &mut h);
     assert_eq!(h, [None; 5]);
 }
+
+/// Every TLAS leaf's world box (the binary tree's, `Tlas::bvh`) holds its instance's triangles
+/// transformed into the world; returns the leaves' summed surface area and that of the boxes
+/// the BLAS's root box alone gives (its eight corners transformed).
+fn world_boxes<L: Lane, const N: usize>(
+    tlas: &Tlas,
+    blases: &[BvhWide<L, N>],
+    meshes: &[Vec<Triangle>],
+    inst: &[Instance],
+    what: &str,
+) -> (f64, f64) {
+    let bvh = tlas.bvh();
+    let (mut tight, mut loose) = (0f64, 0f64);
+    for node in bvh.nodes.iter().filter(|n| n.is_leaf()) {
+        let b = node.aabb();
+        for &i in &bvh.prim_indices[node.prim_range()] {
+            let x = &inst[i as usize];
+            for t in &meshes[x.blas as usize] {
+                for &v in t {
+                    let w = x.transform.transform_point3(v);
+                    assert!(b.contains_point(w), "{what}: instance {i}'s vertex {w} outside {b:?}");
+                }
+            }
+            let root = blases[x.blas as usize].nodes()[0].bounds;
+            let r = (0..N).fold(strahl::Aabb::EMPTY, |a, k| a.union(&root.get(k)));
+            let corners = (0..8).map(|c| {
+                let p = Vec3::new(
+                    if c & 1 == 0 { r.min.x } else { r.max.x },
+                    if c & 2 == 0 { r.min.y } else { r.max.y },
+                    if c & 4 == 0 { r.min.z } else { r.max.z },
+                );
+                x.transform.transform_point3(p)
+            });
+            let l = corners.fold(strahl::Aabb::EMPTY, |a, p| a.union(&strahl::Aabb::new(p, p)));
+            tight += f64::from(b.surface_area());
+            loose += f64::from(l.surface_area());
+        }
+    }
+    (tight, loose)
+}
+
+#[test]
+fn world_boxes_hold_the_instances_and_are_tighter_than_the_root_box() {
+    // An instance's world box is the union of its BLAS's boxes two levels below the root, each
+    // transformed: it must hold every transformed vertex, and under random rotations it is much
+    // smaller than the root box transformed (what Embree and tinybvh place).
+    let meshes = meshes();
+    let inst = instances(60, meshes.len() as u32, 30.0, 61);
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let b4 = blases::<strahl::math::f32x4, 4>(&meshes);
+    let (t8, l8) = world_boxes(&Tlas::build(&inst, &b8).unwrap(), &b8, &meshes, &inst, "bvh8");
+    let (t4, l4) = world_boxes(&Tlas::build(&inst, &b4).unwrap(), &b4, &meshes, &inst, "bvh4");
+    assert!(t8 < 0.9 * l8 && t4 < 0.9 * l4, "areas {t8} / {l8}, {t4} / {l4}");
+    // No tighter than the exact boxes: within the padding of the bounds.
+    assert!(
+        t8 <= t4 * 1.01 + 1.0,
+        "BVH8's boxes are two levels of 64 boxes: {t8} vs {t4}"
+    );
+}
+
+#[test]
+fn refit_answers_as_a_fresh_build() {
+    // A TLAS built over one placement, refitted to another (new transforms, BLAS indices and
+    // masks for every instance): closest, any and masked hits as brute force over the new
+    // placement, single rays and packets, BVH8 and BVH4 BLASes; its leaf boxes hold the moved
+    // instances. Instances made bad by the refit are left out and back in with the next one;
+    // instances the build left out stay out.
+    let meshes = meshes();
+    let spread = 30.0;
+    let before = instances(60, meshes.len() as u32, spread, 71);
+    let mut after = instances(60, meshes.len() as u32, spread, 72);
+    for (i, x) in after.iter_mut().enumerate() {
+        x.mask = [u32::MAX, 0b01, 0b10, 0][i % 4];
+    }
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let b4 = blases::<strahl::math::f32x4, 4>(&meshes);
+    let mut t8 = Tlas::build(&before, &b8).unwrap();
+    let mut t4 = Tlas::build(&before, &b4).unwrap();
+    assert!(!t8.refit(&after[..59], &b8), "one instance fewer");
+    assert!(t8.refit(&after, &b8) && t4.refit(&after, &b4));
+    assert_eq!((t8.left_out(), t4.left_out()), (0, 0));
+    world_boxes(&t8, &b8, &meshes, &after, "refit bvh8");
+    world_boxes(&t4, &b4, &meshes, &after, "refit bvh4");
+    let check_all = |t8: &Tlas, t4: &Tlas, inst: &[Instance], what: &str| {
+        let rays = rays(300, inst, spread, 73);
+        let mut hits = 0;
+        for ray in &rays {
+            // Instances of mask 0 are hidden from every ray, the unmasked walks' too.
+            let any = |h: &InstanceHit| inst[h.instance as usize].mask != 0;
+            let want = reference_filtered::<Moller>(&meshes, inst, None, ray, &any);
+            let got = [
+                t8.intersect::<Moller, _, 8>(&b8, ray),
+                t4.intersect::<Moller, _, 4>(&b4, ray),
+            ];
+            for g in got {
+                same_filtered::<Moller>(g, want, &meshes, inst, ray, what, &any);
+            }
+            assert_eq!(t8.occluded::<Moller, _, 8>(&b8, ray), want.is_some(), "{what}");
+            let seen = |h: &InstanceHit| inst[h.instance as usize].mask & 0b01 != 0;
+            let want_m = reference_filtered::<Moller>(&meshes, inst, None, ray, &seen);
+            let got_m = t8.intersect_masked::<Moller, _, 8>(&b8, ray, 0b01);
+            same_filtered::<Moller>(got_m, want_m, &meshes, inst, ray, what, &seen);
+            assert_eq!(
+                t4.occluded_masked::<Moller, _, 4>(&b4, ray, 0b01),
+                want_m.is_some(),
+                "{what}"
+            );
+            hits += usize::from(want.is_some());
+        }
+        // Packets: camera tiles from outside the region, each lane as one call per ray.
+        let tiles = camera_tiles(Vec3::new(-20.0, 15.0, -25.0), Vec3::splat(spread / 2.0), 32, 16);
+        for p in tiles.chunks(8) {
+            let mut got = [None; 8];
+            t8.intersect8::<Moller, _, 8>(&b8, p, &mut got);
+            for (g, r) in got.iter().zip(p) {
+                let any = |h: &InstanceHit| inst[h.instance as usize].mask != 0;
+                let want = t8.intersect::<Moller, _, 8>(&b8, r);
+                same_filtered::<Moller>(*g, want, &meshes, inst, r, what, &any);
+            }
+        }
+        assert!(hits > 50, "{what}: {hits} hits");
+    };
+    check_all(&t8, &t4, &after, "refit");
+    // Two instances made bad: left out (an empty box), the others answer as before.
+    let mut bad = after.clone();
+    bad[5].transform = Affine3A::from_translation(Vec3::NAN);
+    bad[7].blas = 99;
+    assert!(t8.refit(&bad, &b8) && t4.refit(&bad, &b4));
+    assert_eq!((t8.left_out(), t4.left_out()), (2, 2));
+    check_all(&t8, &t4, &bad, "refit with bad instances");
+    // Placed again: back in.
+    assert!(t8.refit(&after, &b8) && t4.refit(&after, &b4));
+    assert_eq!((t8.left_out(), t4.left_out()), (0, 0));
+    check_all(&t8, &t4, &after, "refit back");
+    // Left out by the build: the tree has no leaf for it, so it stays out.
+    let mut t8 = Tlas::build(&bad, &b8).unwrap();
+    let mut t4 = Tlas::build(&bad, &b4).unwrap();
+    assert!(t8.refit(&after, &b8) && t4.refit(&after, &b4));
+    assert_eq!((t8.left_out(), t4.left_out()), (2, 2));
+    let mut out = after.clone();
+    out[5].transform = Affine3A::from_translation(Vec3::NAN);
+    out[7].transform = Affine3A::from_translation(Vec3::NAN);
+    check_all(&t8, &t4, &out, "left out by the build");
+    // An empty TLAS refits to an empty TLAS.
+    let mut empty = Tlas::build(&[], &b8).unwrap();
+    assert!(empty.refit(&[], &b8) && empty.is_empty());
+    assert!(!empty.refit(&after, &b8));
+}

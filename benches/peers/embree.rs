@@ -244,6 +244,7 @@ unsafe extern "C" {
     fn rtcSetGeometryInstancedScene(geometry: RTCGeometry, scene: RTCScene);
     fn rtcSetGeometryTransform(geometry: RTCGeometry, time_step: c_uint, format: c_uint, xfm: *const c_void);
     fn rtcSetGeometryMask(geometry: RTCGeometry, mask: c_uint);
+    fn rtcGetGeometry(scene: RTCScene, geom_id: c_uint) -> RTCGeometry;
     fn rtcGetDeviceProperty(device: RTCDevice, prop: c_uint) -> isize;
     fn rtcIntersect1(scene: RTCScene, ctx: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
     fn rtcOccluded1(scene: RTCScene, ctx: *mut RTCIntersectContext, ray: *mut RTCRay);
@@ -534,6 +535,24 @@ impl<'d> InstanceScene<'d> {
     #[inline]
     pub fn occluded1_masked(&self, r: &Ray, mask: u32) -> bool {
         occluded1(self.scene, r, mask)
+    }
+
+    /// Moves the instances: a new transform for each (as many as given to [`new`](Self::new)),
+    /// each instance geometry committed, then the top scene (Embree rebuilds its instance-level
+    /// BVH at the scene's quality; the instanced scene is untouched).
+    pub fn set_transforms(&mut self, transforms: &[[f32; 12]]) {
+        // SAFETY: the top scene is live and its geometries were attached in order, so their ids
+        // are 0..n; `rtcGetGeometry` returns null past them, which is checked. Each transform is
+        // 12 floats, copied by Embree.
+        unsafe {
+            for (i, xfm) in transforms.iter().enumerate() {
+                let g = rtcGetGeometry(self.scene, i as c_uint);
+                assert!(!g.is_null(), "no instance {i}");
+                rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, xfm.as_ptr().cast());
+                rtcCommitGeometry(g);
+            }
+            rtcCommitScene(self.scene);
+        }
     }
 
     /// Embree's stream API through the instances (`rtcIntersect1M`, as [`Scene::intersect1m`]).

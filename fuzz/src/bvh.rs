@@ -666,6 +666,56 @@ fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
             }
         }
     }
+    // `Tlas::refit` to the good transforms rotated among the first three instances (each one
+    // moves): answers as a fresh build over the moved instances (closest hits up to a near tie,
+    // the trees differing), where both leave out the same instances (on a scene near `f32::MAX`
+    // an instance the build left out stays out); then refitted back: the very answers of the
+    // first build.
+    let mut moved = inst.clone();
+    for (k, x) in moved.iter_mut().take(3).enumerate() {
+        x.transform = good[(k + 1) % 3];
+    }
+    let fresh = Tlas::build(&moved, blases).expect("five instances build");
+    let mut re = tlas.clone();
+    assert!(re.refit(&moved, blases), "tlas refit");
+    assert!(re.left_out() >= fresh.left_out(), "tlas refit left_out");
+    if scene_tame {
+        assert_eq!(re.left_out(), fresh.left_out(), "tlas refit left_out");
+    }
+    if re.left_out() == fresh.left_out() {
+        for (i, ray) in case.rays.iter().enumerate() {
+            assert_eq!(
+                re.occluded::<Watertight, _, 8>(blases, ray),
+                fresh.occluded::<Watertight, _, 8>(blases, ray),
+                "tlas refit ray {i}: occluded"
+            );
+            match (
+                re.intersect::<Watertight, _, 8>(blases, ray),
+                fresh.intersect::<Watertight, _, 8>(blases, ray),
+            ) {
+                (None, None) => {}
+                (Some(r), Some(f)) => assert!(
+                    r.hit.t == f.hit.t || near_tie(ray, r.hit, f.hit) || near_tie(ray, f.hit, r.hit),
+                    "tlas refit ray {i}: {r:?} against {f:?}"
+                ),
+                (r, f) => panic!("tlas refit ray {i}: {r:?} against {f:?}"),
+            }
+        }
+    }
+    assert!(re.refit(&inst, blases), "tlas refit back");
+    assert_eq!(re.left_out(), tlas.left_out(), "tlas refit back left_out");
+    for (i, ray) in case.rays.iter().enumerate() {
+        assert_eq!(
+            re.intersect::<Watertight, _, 8>(blases, ray),
+            tlas.intersect::<Watertight, _, 8>(blases, ray),
+            "tlas refit back ray {i}"
+        );
+        assert_eq!(
+            re.occluded::<Watertight, _, 8>(blases, ray),
+            tlas.occluded::<Watertight, _, 8>(blases, ray),
+            "tlas refit back ray {i}: occluded"
+        );
+    }
 }
 
 /// `Bvh8::refit` to the scene's triangles shifted by one slot (triangle `i` takes triangle
