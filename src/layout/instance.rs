@@ -118,13 +118,13 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 ///   by `2^-16` of its size and distance from the origin against the rounding of the transform.
 ///   Under rotations this is much tighter than the root box through the transform (what Embree
 ///   and tinybvh place; `tests/instance.rs` checks both that it holds every transformed vertex
-///   and that it is smaller), and the TLAS walks 2-4% faster on the bench's turned instances.
+///   and that it is smaller), and the TLAS walks 0-4% faster on the bench's turned instances.
 ///   Then a full-sweep SAH BVH2 over those boxes with one instance per leaf
 ///   ([`BuildParams::quality`]: a TLAS holds few boxes), collapsed greedily (largest child
 ///   opened first) into 4-wide nodes whose child boxes sit in SoA lanes for the x4 slab test.
 /// - **Moving instances** ([`Tlas::refit`], Embree's refit quality): new transforms (and BLAS
 ///   indices and masks) for the same instances, the world boxes made again and the tree's boxes
-///   grown bottom-up in its old shape: 2.2-6.3x faster than a rebuild (see the README), at a
+///   grown bottom-up in its old shape: 2.1-5.7x faster than a rebuild (see the README), at a
 ///   quality that falls the further the instances move; a rebuild restores it.
 /// - **Bad input**: an instance whose transform is not finite or not invertible (`|det M|` not
 ///   a normal float), whose BLAS index is out of range, whose BLAS is empty, or whose world box
