@@ -32,9 +32,9 @@
 //! 80-triangle icosphere): the next frame's placement of every instance (each moved by a tenth
 //! of the mesh's size and turned a little, two placements taking turns) by a rebuild of the TLAS
 //! (`tlas`: the full sweep; `tlas_fast`: `Tlas::build_with` and `BuildParams::fast()`), by
-//! `Tlas::refit` (`tlas_refit`), and by Embree's new transforms and commit of the top scene
-//! (`embree_commit_low` / `_medium`: the scene's build quality). The trees' SAH costs after the
-//! move are printed.
+//! `Tlas::refit` (`tlas_refit`; `tlas_refit_par2`: `refit_par` on 2 threads), and by Embree's
+//! new transforms and commit of the top scene (`embree_commit_low` / `_medium`: the scene's
+//! build quality). The trees' SAH costs after the move are printed.
 //!
 //! `cargo bench --bench instance -- --noplot` (add `--features embree` for Embree)
 
@@ -150,6 +150,13 @@ fn bench_update(c: &mut Criterion, group: &str, mesh: &[Triangle], inst: &[Insta
         bch.iter(|| {
             f ^= 1;
             assert!(tlas.refit(black_box(frames[f]), blases));
+        })
+    });
+    g.bench_function("tlas_refit_par2", |bch| {
+        let mut f = 0;
+        bch.iter(|| {
+            f ^= 1;
+            assert!(tlas.refit_par(black_box(frames[f]), blases, 2));
         })
     });
     #[cfg(feature = "embree")]

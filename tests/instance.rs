@@ -911,3 +911,40 @@ fn refit_answers_as_a_fresh_build() {
     assert!(empty.refit(&[], &b8) && empty.is_empty());
     assert!(!empty.refit(&after, &b8));
 }
+
+#[test]
+fn refit_on_threads_is_the_refit() {
+    // 3,000 instances (some bad, some made bad by the move, some left out by the build), moved
+    // and refitted on 1 to 4 threads (chunks of 1,024): the very tree of the refit, the same
+    // counts and answers.
+    let meshes = meshes();
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let mut before = instances(3000, meshes.len() as u32, 100.0, 81);
+    let mut after = instances(3000, meshes.len() as u32, 100.0, 82);
+    for i in (0..3000).step_by(97) {
+        before[i].transform = Affine3A::from_translation(Vec3::NAN);
+    }
+    for i in (5..3000).step_by(89) {
+        after[i].blas = 7;
+    }
+    let mut one = Tlas::build(&before, &b8).unwrap();
+    assert!(one.refit(&after, &b8));
+    let rays = rays(200, &after, 100.0, 83);
+    for threads in 1..=4 {
+        let mut par = Tlas::build(&before, &b8).unwrap();
+        assert!(par.refit_par(&after, &b8, threads));
+        assert_eq!(par.bvh().nodes, one.bvh().nodes, "{threads} threads");
+        assert_eq!(par.left_out(), one.left_out());
+        for r in &rays {
+            assert_eq!(
+                par.intersect::<Moller, _, 8>(&b8, r),
+                one.intersect::<Moller, _, 8>(&b8, r)
+            );
+        }
+    }
+    assert_eq!(
+        one.left_out(),
+        31 + 34,
+        "31 left out by the build, 34 by the refit (none both)"
+    );
+}

@@ -402,6 +402,21 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     usable_box(world.min, world.max).then_some((world, inv))
 }
 
+/// Places `instances` (those `placed` in the tree; the others left out) into `boxes` and
+/// `inverse` (empty box and identity where left out).
+fn place_range<L: Lane, const N: usize>(
+    placed: &[bool],
+    instances: &[Instance],
+    blases: &[BvhWide<L, N>],
+    boxes: &mut [Aabb],
+    inverse: &mut [Affine3A],
+) {
+    for (k, inst) in instances.iter().enumerate() {
+        let now = if placed[k] { place(inst, blases) } else { None };
+        (boxes[k], inverse[k]) = now.unwrap_or((Aabb::EMPTY, Affine3A::IDENTITY));
+    }
+}
+
 impl Tlas {
     /// Builds the top level over `instances`, whose `blas` fields index `blases` (pass the same
     /// slice to the traversals). Instances that cannot be used are left out and counted
@@ -608,6 +623,56 @@ impl Tlas {
     /// assert_eq!(tlas.left_out(), 1);
     /// ```
     pub fn refit<L: Lane, const N: usize>(&mut self, instances: &[Instance], blases: &[BvhWide<L, N>]) -> bool {
+        self.refit_with(instances, |placed, boxes, inverse| {
+            place_range(placed, instances, blases, boxes, inverse);
+        })
+    }
+
+    /// [`refit`](Self::refit) with the instances placed on up to `threads` threads (in chunks
+    /// of at least 1,024 instances), the tree's boxes then grown on the calling thread: the
+    /// same tree as [`refit`](Self::refit) for any number of threads (`std`).
+    ///
+    /// ```
+    /// use strahl::{Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}};
+    /// use strahl::glam::Affine3A;
+    /// let tris = strahl::scene::icosphere(1).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let at = |x: f32| (0..5000).map(|i| Instance::new(Affine3A::from_translation(Vec3::new(3.0 * i as f32 + x, 0.0, 0.0)), 0)).collect::<Vec<_>>();
+    /// let (mut one, mut two) = (Tlas::build(&at(0.0), &blases).unwrap(), Tlas::build(&at(0.0), &blases).unwrap());
+    /// assert!(one.refit(&at(0.5), &blases) && two.refit_par(&at(0.5), &blases, 2));
+    /// assert_eq!(one.bvh().nodes, two.bvh().nodes);
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn refit_par<L: Lane, const N: usize>(
+        &mut self,
+        instances: &[Instance],
+        blases: &[BvhWide<L, N>],
+        threads: usize,
+    ) -> bool {
+        self.refit_with(instances, |placed, boxes, inverse| {
+            let n = instances.len();
+            let chunk = n.div_ceil(threads.max(1) * 4).max(1024);
+            let ranges: Vec<(usize, usize)> = (0..n).step_by(chunk).map(|lo| (lo, (lo + chunk).min(n))).collect();
+            let jobs: Vec<_> = ranges
+                .iter()
+                .zip(crate::par::split_ranges(boxes, ranges.iter().copied()))
+                .zip(crate::par::split_ranges(inverse, ranges.iter().copied()))
+                .map(|((&(lo, hi), b), inv)| (lo, hi, b, inv))
+                .collect();
+            crate::par::each_job(jobs, threads, |(lo, hi, b, inv)| {
+                place_range(&placed[lo..hi], &instances[lo..hi], blases, b, inv);
+            });
+        })
+    }
+
+    /// The refits' common part: `place_all(placed, boxes, inverse)` places the instances (those
+    /// in the tree, `placed`), then the counts, BLAS indices, masks and the trees' boxes follow.
+    fn refit_with(
+        &mut self,
+        instances: &[Instance],
+        place_all: impl FnOnce(&[bool], &mut [Aabb], &mut [Affine3A]),
+    ) -> bool {
         if instances.len() != self.inverse.len() {
             return false;
         }
@@ -617,23 +682,13 @@ impl Tlas {
         for &i in &self.bvh.prim_indices {
             placed[i as usize] = true;
         }
-        let mut left_out = 0u32;
+        place_all(&placed, &mut boxes, &mut self.inverse);
+        // A placed instance's box is never empty (`usable_box`); a left-out one's is.
+        self.left_out = boxes.iter().filter(|b| b.is_empty()).count() as u32;
         for (k, inst) in instances.iter().enumerate() {
-            let now = if placed[k] { place(inst, blases) } else { None };
-            match now {
-                Some((b, inv)) => {
-                    boxes[k] = b;
-                    self.inverse[k] = inv;
-                }
-                None => {
-                    self.inverse[k] = Affine3A::IDENTITY;
-                    left_out += 1;
-                }
-            }
             self.blas[k] = inst.blas;
             self.masks[k] = inst.mask;
         }
-        self.left_out = left_out;
         // The binary tree (what `bvh()` shows); its structure is the build's, so the refit's
         // checks cannot fail.
         let refitted = self.bvh.refit(&boxes[..]);
