@@ -948,3 +948,94 @@ fn refit_on_threads_is_the_refit() {
         "31 left out by the build, 34 by the refit (none both)"
     );
 }
+
+#[test]
+fn world_boxes_hold_parts_far_from_the_origin_moved_back_to_it() {
+    // A BLAS with a small part far from its origin (a cube of side 0.01 at x = 1,000, whose
+    // corners touch its box, beside a sphere of radius 100 at the origin), turned at random and
+    // moved so that the cube lands near the world's origin: the transform's terms cancel, and
+    // its rounding scales with them, not with the result. The world boxes must hold every vertex
+    // (in f64) and the TLAS find every hit of the object-space trace of rays aimed at the cube's
+    // corners. (Found in review: padding by the transformed centre's distance from the origin
+    // missed hits here.)
+    let corner = |i: usize| {
+        Vec3::new(1000.0, 0.0, 0.0) + Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, (i >> 2) as f32) * 0.01
+    };
+    // Two triangles per face: the faces of constant x, y and z at 0 and 1.
+    let cube: Vec<Triangle> = (0..3)
+        .flat_map(|a| {
+            let (b, c) = (1usize << ((a + 1) % 3), 1usize << ((a + 2) % 3));
+            [0, 1usize << a].into_iter().flat_map(move |side| {
+                [[side, side | b, side | b | c], [side, side | b | c, side | c]].map(|t| t.map(corner))
+            })
+        })
+        .collect();
+    assert_eq!(cube.len(), 12);
+    let sphere: Vec<Triangle> = scene::icosphere(2)
+        .to_soup()
+        .iter()
+        .map(|t| t.map(|v| v * 100.0))
+        .collect();
+    let mesh: Vec<Triangle> = cube.iter().chain(&sphere).copied().collect();
+    let meshes = vec![mesh];
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let b4 = blases::<strahl::math::f32x4, 4>(&meshes);
+    let mut rng = Rng::new(91);
+    let inst: Vec<Instance> = (0..200)
+        .map(|_| {
+            let q = Quat::from_axis_angle(rng.unit_vector(), rng.range(0.0, std::f32::consts::TAU));
+            let t = -(q * Vec3::new(1000.0, 0.0, 0.0)) + Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 0.01;
+            Instance::new(Affine3A::from_rotation_translation(q, t), 0)
+        })
+        .collect();
+    for (k, x) in inst.iter().enumerate() {
+        let one = [*x];
+        let t8 = Tlas::build(&one, &b8).unwrap();
+        let t4 = Tlas::build(&one, &b4).unwrap();
+        for tlas in [&t8, &t4] {
+            let b = tlas.bvh().bounds();
+            let m = x.transform;
+            for t in &meshes[0] {
+                for &v in t {
+                    // In f64: the exact image of the f32 vertex under the f32 transform.
+                    let (v, c) = (v.as_dvec3(), m.matrix3);
+                    let w = c.x_axis.as_dvec3() * v.x
+                        + c.y_axis.as_dvec3() * v.y
+                        + c.z_axis.as_dvec3() * v.z
+                        + m.translation.as_dvec3();
+                    assert!(
+                        (0..3).all(|a| f64::from(b.min[a]) <= w[a] && w[a] <= f64::from(b.max[a])),
+                        "instance {k}: {w} outside {b:?}"
+                    );
+                }
+            }
+        }
+        // Rays from 3 units away at each of the cube's corners, as the object-space trace sees
+        // them (watertight: Möller's test can report a grazing hit just outside the cube's box
+        // at these object-space magnitudes, which no box test keeps, in a BLAS alone as well).
+        for t in &cube {
+            for &v in t {
+                let target = x.transform.transform_point3(v);
+                let o = target + rng.unit_vector() * 3.0;
+                let ray = Ray::new(o, target - o);
+                let want = reference::<Watertight>(&meshes, &one, &ray);
+                same::<Watertight>(
+                    t8.intersect::<Watertight, _, 8>(&b8, &ray),
+                    want,
+                    &meshes,
+                    &one,
+                    &ray,
+                    "bvh8",
+                );
+                same::<Watertight>(
+                    t4.intersect::<Watertight, _, 4>(&b4, &ray),
+                    want,
+                    &meshes,
+                    &one,
+                    &ray,
+                    "bvh4",
+                );
+            }
+        }
+    }
+}

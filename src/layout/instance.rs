@@ -115,7 +115,9 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 /// - **Build** ([`Tlas::build`]): each instance's world box is the union of the BLAS's boxes
 ///   one level below its root's slots (up to `N * N` boxes; a leaf slot's own box), each through
 ///   the transform (centre and half extent, `|M| e`, all of a node's lanes at once) and padded
-///   by `2^-16` of its size and distance from the origin against the rounding of the transform.
+///   by `2^-16` of its size and of the magnitudes the transform sums (`|M| |c| + |t|`), against
+///   the rounding of the transform (also where those terms cancel: a part of the BLAS far from
+///   its origin placed near the world's origin).
 ///   Under rotations this is much tighter than the root box through the transform (what Embree
 ///   and tinybvh place; `tests/instance.rs` checks both that it holds every transformed vertex
 ///   and that it is smaller), and the TLAS walks 0-4% faster on the bench's turned instances.
@@ -152,9 +154,9 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 /// - **Accuracy**: hits are those of a trace of the object-space ray through each instance's BLAS
 ///   (bit for bit, `tests/instance.rs`); against the triangles transformed into the world, `t`
 ///   differs by the transform's rounding (relative 1e-5 in the tests). Rays that start far from
-///   an instance (more than about 10^4 times its size) see the rounding of `M^-1 o` grow with the
-///   distance and may be culled by the padded world box where the object-space trace would graze
-///   the instance.
+///   an instance (more than about 10^4 times the size of the boxes its world box is made of) see
+///   the rounding of `M^-1 o` grow with the distance and may be culled by the padded world box
+///   where the object-space trace would graze the instance.
 ///
 /// ```
 /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
@@ -353,9 +355,18 @@ fn grow_world<L: Lane>(lo: &mut [L; 3], hi: &mut [L; 3], m: &Affine3A, b: &AabbL
     let used = b.min[0].le(b.max[0]) & take.gt(L::splat(0.0));
     let (pad, zero) = (L::splat(PAD), L::splat(0.0));
     let big = we[0].max_l(we[1]).max_l(we[2]) * pad;
+    // The rounding of `M c + t` scales with the magnitudes summed, not with the result: a box
+    // far from its object's origin can land near the world's origin (the terms cancel), so the
+    // padding takes `|M| |c| + |t|` (scaled before the sum, which could overflow where a box
+    // reaches near `f32::MAX`). Found in review: padding by `|M c + t|` missed hits of a small
+    // box 1,000 units from its origin moved back to the world's origin (`tests/instance.rs`).
+    let cp: [L; 3] = core::array::from_fn(|a| c[a].max_l(zero - c[a]) * pad);
     for r in 0..3 {
-        // Scaled before the sum, which could overflow where a box reaches near `f32::MAX`.
-        let w = we[r] + we[r] * pad + wc[r].max_l(zero - wc[r]) * pad + big;
+        let mag = cp[0] * L::splat(cols[0][r].abs())
+            + cp[1] * L::splat(cols[1][r].abs())
+            + cp[2] * L::splat(cols[2][r].abs())
+            + L::splat(m.translation[r].abs() * PAD);
+        let w = we[r] + we[r] * pad + mag + big;
         lo[r] = used.select(lo[r].min_l(wc[r] - w), lo[r]);
         hi[r] = used.select(hi[r].max_l(wc[r] + w), hi[r]);
     }
@@ -372,7 +383,8 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     if !(inv.matrix3.is_finite() && inv.translation.is_finite()) {
         return None;
     }
-    let root = blases.get(inst.blas as usize)?.nodes.first()?;
+    let blas = blases.get(inst.blas as usize)?;
+    let root = blas.nodes.first()?;
     let b = lanes_union(&root.bounds);
     if !(b.min.is_finite() && b.max.is_finite()) || b.min.cmpgt(b.max).any() {
         return None;
@@ -380,7 +392,6 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     // The union of the boxes one level below the root's slots (the root's own box for a leaf
     // slot), each transformed: much tighter than the root box transformed where the instance
     // is turned (see `tests/instance.rs`).
-    let blas = &blases[inst.blas as usize];
     let (mut lo, mut hi) = ([L::splat(f32::INFINITY); 3], [L::splat(f32::NEG_INFINITY); 3]);
     // 1.0 in the lanes of the root's leaf slots.
     let mut leaf = [0f32; 8];
