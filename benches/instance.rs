@@ -29,8 +29,8 @@
 //! instances did not finish a criterion run here and is left out).
 //!
 //! Updates (`instance/*/update`, the two scenes and `crowd100k`: 100,000 instances of an
-//! 80-triangle icosphere): the next frame's placement of every instance (each moved by a tenth
-//! of the mesh's size and turned a little, two placements taking turns) by a rebuild of the TLAS
+//! 80-triangle icosphere): the next frame's placement of every instance (each moved by up to a
+//! tenth of the mesh's size on each axis and turned a little, two placements taking turns) by a rebuild of the TLAS
 //! (`tlas`: the full sweep; `tlas_fast`: `Tlas::build_with` and `BuildParams::fast()`), by
 //! `Tlas::refit` (`tlas_refit`; `tlas_refit_par2`: `refit_par` on 2 threads), and by Embree's
 //! new transforms and commit of the top scene (`embree_commit_low` / `_medium`: the scene's
@@ -419,8 +419,8 @@ fn bench_scene(c: &mut Criterion, name: &str, mesh: Vec<Triangle>, k: usize, bui
     bench_update(c, &format!("instance/{name}/update"), &mesh, &inst, &blases, size * 0.1);
 }
 
-/// 100,000 instances of an 80-triangle icosphere at random places and turns in a cube of side
-/// 400 (about 8 diameters apart): the update of a crowd of moving objects.
+/// 100,000 instances of an 80-triangle icosphere (radius 1) at random places and turns in a
+/// cube of side 400 (about 8.6 apart, 4.3 diameters): the update of a crowd of moving objects.
 fn bench_crowd(c: &mut Criterion) {
     let mesh = scene::icosphere(1).to_soup();
     let blases = [build_bvh8(&mesh)];

@@ -157,7 +157,7 @@ fn crowd(threads: usize) {
         assert_eq!(
             hits.iter().filter(|h| h.is_some()).count(),
             fresh_hits,
-            "the refitted and the rebuilt TLAS see the same"
+            "the refitted and the rebuilt TLAS hit as many pixels"
         );
         println!(
             "{f:5} | {refit_ms:8.3} | {rebuild_ms:10.3} | {:14.1}x | {trace_refit:14.2} | {trace_fresh:16.2} | {:.2}x",

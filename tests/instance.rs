@@ -797,6 +797,10 @@ fn world_boxes<L: Lane, const N: usize>(
                 x.transform.transform_point3(p)
             });
             let l = corners.fold(strahl::Aabb::EMPTY, |a, p| a.union(&strahl::Aabb::new(p, p)));
+            assert!(
+                b.surface_area() <= l.surface_area() * 1.001,
+                "{what}: instance {i}'s box {b:?} larger than the root box's {l:?}"
+            );
             tight += f64::from(b.surface_area());
             loose += f64::from(l.surface_area());
         }
@@ -806,9 +810,10 @@ fn world_boxes<L: Lane, const N: usize>(
 
 #[test]
 fn world_boxes_hold_the_instances_and_are_tighter_than_the_root_box() {
-    // An instance's world box is the union of its BLAS's boxes two levels below the root, each
-    // transformed: it must hold every transformed vertex, and under random rotations it is much
-    // smaller than the root box transformed (what Embree and tinybvh place).
+    // An instance's world box is the union of its BLAS's boxes one level below the root's slots,
+    // each transformed: it must hold every transformed vertex, and under random rotations it is
+    // much smaller than the root box transformed (what Embree and tinybvh place), instance by
+    // instance (up to the padding) and in total.
     let meshes = meshes();
     let inst = instances(60, meshes.len() as u32, 30.0, 61);
     let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
@@ -816,15 +821,10 @@ fn world_boxes_hold_the_instances_and_are_tighter_than_the_root_box() {
     let (t8, l8) = world_boxes(&Tlas::build(&inst, &b8).unwrap(), &b8, &meshes, &inst, "bvh8");
     let (t4, l4) = world_boxes(&Tlas::build(&inst, &b4).unwrap(), &b4, &meshes, &inst, "bvh4");
     assert!(t8 < 0.9 * l8 && t4 < 0.9 * l4, "areas {t8} / {l8}, {t4} / {l4}");
-    // No tighter than the exact boxes: within the padding of the bounds.
-    assert!(
-        t8 <= t4 * 1.01 + 1.0,
-        "BVH8's boxes are two levels of 64 boxes: {t8} vs {t4}"
-    );
 }
 
 #[test]
-fn refit_answers_as_a_fresh_build() {
+fn refit_answers_as_brute_force_over_the_moved_instances() {
     // A TLAS built over one placement, refitted to another (new transforms, BLAS indices and
     // masks for every instance): closest, any and masked hits as brute force over the new
     // placement, single rays and packets, BVH8 and BVH4 BLASes; its leaf boxes hold the moved

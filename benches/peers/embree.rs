@@ -462,6 +462,8 @@ impl Drop for Scene<'_> {
 #[allow(dead_code)] // used by some bench targets only
 pub struct InstanceScene<'d> {
     scene: RTCScene,
+    /// Instance geometries in the top scene (ids `0..instances`).
+    instances: usize,
     _blas: Scene<'d>,
 }
 
@@ -509,7 +511,11 @@ impl<'d> InstanceScene<'d> {
             }
             rtcCommitScene(scene);
             assert_eq!(rtcGetDeviceError(device.0), 0, "Embree reported an error");
-            Self { scene, _blas: blas }
+            Self {
+                scene,
+                instances: transforms.len(),
+                _blas: blas,
+            }
         }
     }
 
@@ -541,6 +547,7 @@ impl<'d> InstanceScene<'d> {
     /// each instance geometry committed, then the top scene (Embree rebuilds its instance-level
     /// BVH at the scene's quality; the instanced scene is untouched).
     pub fn set_transforms(&mut self, transforms: &[[f32; 12]]) {
+        assert_eq!(transforms.len(), self.instances, "one transform per instance");
         // SAFETY: the top scene is live and its geometries were attached in order, so their ids
         // are 0..n; `rtcGetGeometry` returns null past them, which is checked. Each transform is
         // 12 floats, copied by Embree.

@@ -124,9 +124,11 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 ///   Then a full-sweep SAH BVH2 over those boxes with one instance per leaf
 ///   ([`BuildParams::quality`]: a TLAS holds few boxes), collapsed greedily (largest child
 ///   opened first) into 4-wide nodes whose child boxes sit in SoA lanes for the x4 slab test.
-/// - **Moving instances** ([`Tlas::refit`], Embree's refit quality): new transforms (and BLAS
-///   indices and masks) for the same instances, the world boxes made again and the tree's boxes
-///   grown bottom-up in its old shape: 2.1-5.7x faster than a rebuild (see the README), at a
+/// - **Moving instances** ([`Tlas::refit`]; for the TLAS what Embree's refit build quality does
+///   for a geometry's BVH, where Embree itself rebuilds its instance level on a commit): new
+///   transforms (and BLAS indices and masks) for the same instances, the world boxes made again
+///   and the tree's boxes grown bottom-up in its old shape: 2.1-5.7x faster than a full-sweep
+///   rebuild and 1.5-2.0x faster than one by `BuildParams::fast()` (see the README), at a
 ///   quality that falls the further the instances move; a rebuild restores it.
 /// - **Bad input**: an instance whose transform is not finite or not invertible (`|det M|` not
 ///   a normal float), whose BLAS index is out of range, whose BLAS is empty, or whose world box
@@ -393,7 +395,7 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     // slot), each transformed: much tighter than the root box transformed where the instance
     // is turned (see `tests/instance.rs`).
     let (mut lo, mut hi) = ([L::splat(f32::INFINITY); 3], [L::splat(f32::NEG_INFINITY); 3]);
-    // 1.0 in the lanes of the root's leaf slots.
+    // 1.0 in the lanes of the root's leaf slots (`N <= 8`: `WideNode::LANES_MATCH`).
     let mut leaf = [0f32; 8];
     for (flag, &c) in leaf.iter_mut().zip(&root.child) {
         if c & LEAF_BIT == 0
@@ -461,7 +463,8 @@ impl Tlas {
     /// `params` (its leaf sizes set to one instance a leaf; its strategy, bins and refinement
     /// apply). [`build`](Self::build) takes [`BuildParams::quality`] (the
     /// full sweep); for a TLAS of many instances rebuilt every frame, a binned preset builds
-    /// faster at a little cost in tracing (on 100,000 instances: see the README). Errors where
+    /// faster at a little cost in SAH cost (`fast()` on 100,000 instances: 2.8x faster, SAH cost
+    /// +3.6%; see the README; trace times not measured). Errors where
     /// the builder does (more instances than it indexes, parameters out of range).
     ///
     /// ```
@@ -603,7 +606,8 @@ impl Tlas {
         true
     }
 
-    /// Moves the instances without a rebuild (Embree's refit quality, for animation): takes
+    /// Moves the instances without a rebuild (for animation; what Embree's refit build quality
+    /// does for a geometry's BVH): takes
     /// `instances` (as many as given to [`build`](Self::build): their transforms, BLAS indices
     /// and masks may all have changed), places each again and grows the tree's boxes bottom-up
     /// around the new world boxes, keeping the tree's shape. Time linear in the number of
@@ -764,13 +768,24 @@ impl Tlas {
             + core::mem::size_of_val(self.masks.as_slice())
     }
 
-    /// `true` if no instance can be hit.
+    /// `true` if no instance can be hit: none given, or every one left out (by the build or by
+    /// the last [`refit`](Self::refit)).
     ///
     /// ```
-    /// assert!(strahl::layout::Tlas::default().is_empty());
+    /// use strahl::{Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}};
+    /// use strahl::glam::Affine3A;
+    /// assert!(Tlas::default().is_empty());
+    /// let tris = strahl::scene::icosphere(1).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let mut tlas = Tlas::build(&[Instance::new(Affine3A::IDENTITY, 0)], &blases).unwrap();
+    /// assert!(!tlas.is_empty());
+    /// // Moved to a transform that cannot be inverted: left out, nothing to hit.
+    /// assert!(tlas.refit(&[Instance::new(Affine3A::from_scale(Vec3::ZERO), 0)], &blases));
+    /// assert!(tlas.is_empty());
     /// ```
     pub fn is_empty(&self) -> bool {
-        self.bvh.nodes.is_empty()
+        self.bvh.nodes.is_empty() || self.left_out as usize == self.inverse.len()
     }
 
     /// The binary BVH over the instances' world boxes that the 4-wide nodes were collapsed from
@@ -1518,6 +1533,69 @@ mod tests {
                 .child
                 .iter()
                 .fold(0, |a, &k| a | below(nodes, masks, k))
+        }
+    }
+
+    #[test]
+    fn refit_and_back_is_the_build() {
+        // Refitted to other placements (every instance moved and turned, some left out) and
+        // back: the 4-wide nodes (boxes, codes, masks) and the binary tree are the build's, bit
+        // for bit; in between, every slot's box is the union of the boxes below it.
+        let tris = crate::scene::icosphere(2).to_soup();
+        let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+        let blases = [Bvh4::from_bvh2(&b2, &tris[..]).unwrap()];
+        let mut rng = crate::scene::Rng::new(6);
+        let mut place_all = |spread: f32| -> Vec<Instance> {
+            (0..200)
+                .map(|i| {
+                    let q = glam::Quat::from_axis_angle(rng.unit_vector(), rng.range(0.0, 6.0));
+                    let t = Vec3::new(rng.f32(), rng.f32(), rng.f32()) * spread;
+                    Instance::new(Affine3A::from_rotation_translation(q, t), 0).with_mask(1 << (i % 5))
+                })
+                .collect()
+        };
+        let first = place_all(40.0);
+        let mut other = place_all(60.0);
+        other[7].transform = Affine3A::from_translation(Vec3::NAN);
+        let built = Tlas::build(&first, &blases).unwrap();
+        let mut t = built.clone();
+        assert!(t.refit(&other, &blases));
+        assert_eq!(t.left_out(), 1);
+        fn union_below(t: &Tlas, c: u32) -> Aabb {
+            if c == EMPTY_CHILD {
+                Aabb::EMPTY
+            } else if c & LEAF_BIT != 0 {
+                let i = c & !LEAF_BIT;
+                let leaf = t
+                    .bvh
+                    .nodes
+                    .iter()
+                    .find(|n| n.is_leaf() && t.bvh.prim_indices[n.prim_range()] == [i]);
+                leaf.map_or(Aabb::EMPTY, |n| n.aabb())
+            } else {
+                t.nodes[c as usize]
+                    .child
+                    .iter()
+                    .fold(Aabb::EMPTY, |a, &k| a.union(&union_below(t, k)))
+            }
+        }
+        for n in &t.nodes {
+            for (s, &c) in n.child.iter().enumerate() {
+                assert_eq!(n.bounds.get(s), union_below(&t, c), "slot {s}");
+            }
+        }
+        assert!(t.refit(&first, &blases));
+        assert_eq!(t.left_out(), 0);
+        assert_eq!(t.bvh.nodes, built.bvh.nodes);
+        for (a, b) in t.nodes.iter().zip(&built.nodes) {
+            assert_eq!((a.child, a.mask), (b.child, b.mask));
+            for s in 0..4 {
+                let (x, y) = (a.bounds.get(s), b.bounds.get(s));
+                assert_eq!(
+                    (x.min.to_array(), x.max.to_array()),
+                    (y.min.to_array(), y.max.to_array())
+                );
+            }
         }
     }
 
