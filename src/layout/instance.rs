@@ -120,15 +120,16 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
 ///   its origin placed near the world's origin).
 ///   Under rotations this is much tighter than the root box through the transform (what Embree
 ///   and tinybvh place; `tests/instance.rs` checks both that it holds every transformed vertex
-///   and that it is smaller), and the TLAS walks 0-4% faster on the bench's turned instances.
+///   and that it is smaller); on the bench's instances, turned about y only, the TLAS walks 1-4%
+///   faster on the spheres and within the machine's spread on the bunnies.
 ///   Then a full-sweep SAH BVH2 over those boxes with one instance per leaf
 ///   ([`BuildParams::quality`]: a TLAS holds few boxes), collapsed greedily (largest child
 ///   opened first) into 4-wide nodes whose child boxes sit in SoA lanes for the x4 slab test.
 /// - **Moving instances** ([`Tlas::refit`]; for the TLAS what Embree's refit build quality does
 ///   for a geometry's BVH, where Embree itself rebuilds its instance level on a commit): new
 ///   transforms (and BLAS indices and masks) for the same instances, the world boxes made again
-///   and the tree's boxes grown bottom-up in its old shape: 2.1-5.7x faster than a full-sweep
-///   rebuild and 1.5-2.0x faster than one by `BuildParams::fast()` (see the README), at a
+///   and the tree's boxes grown bottom-up in its old shape: 2.0-5.2x faster than a full-sweep
+///   rebuild and 1.4-1.9x faster than one by `BuildParams::fast()` (see the README), at a
 ///   quality that falls the further the instances move; a rebuild restores it.
 /// - **Bad input**: an instance whose transform is not finite or not invertible (`|det M|` not
 ///   a normal float), whose BLAS index is out of range, whose BLAS is empty, or whose world box
