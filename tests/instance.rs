@@ -1039,3 +1039,61 @@ fn world_boxes_hold_parts_far_from_the_origin_moved_back_to_it() {
         }
     }
 }
+
+#[test]
+fn blas_boxes_that_overflow_in_the_transform_leave_the_instance_out() {
+    // A leaf of two triangles whose union's extent overflows `f32` (from -1.71e38 to 1.71e38),
+    // each usable alone, beside a leaf of one sane triangle: the world box cannot be made, so the
+    // instance is left out whole (never hit), not placed with the box that did transform. (Found
+    // by the `bvh` fuzz target, seed `crash-tlas-overflowed-lane`: the overflowed box's NaN lane
+    // was dropped by the lane reductions and a hit outside the rest was culled.)
+    let tris: Vec<Triangle> = vec![
+        [
+            Vec3::new(-1.71e38, 0.0, 0.0),
+            Vec3::new(-1.6e38, 1.0, 0.0),
+            Vec3::new(-1.6e38, 0.0, 1.0),
+        ],
+        [
+            Vec3::new(1.71e38, 0.0, 0.0),
+            Vec3::new(1.6e38, 1.0, 0.0),
+            Vec3::new(1.6e38, 0.0, 1.0),
+        ],
+        [
+            Vec3::new(-1.7e38, 1e37, 0.0),
+            Vec3::new(-1.69e38, 1e37, 1.0),
+            Vec3::new(-1.7e38, 1.1e37, 0.0),
+        ],
+    ];
+    let params = BuildParams {
+        strategy: strahl::build::Strategy::Median,
+        min_leaf_size: 1,
+        max_leaf_size: 2,
+        ..BuildParams::default()
+    };
+    let (b2, stats) = Bvh2::build(&tris[..], &params).unwrap();
+    assert_eq!(stats.invalid, 0);
+    let b8 = vec![strahl::layout::Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    let root = &b8[0].nodes()[0];
+    let slots: Vec<strahl::Aabb> = (0..8).map(|i| root.bounds.get(i)).filter(|b| !b.is_empty()).collect();
+    assert_eq!(slots.len(), 2, "{slots:?}");
+    assert!(slots.iter().any(|b| !(b.max.x - b.min.x).is_finite()), "{slots:?}");
+    // Along -x through the second triangle.
+    let ray = Ray::new(Vec3::new(3e38, 0.2, 0.2), -Vec3::X);
+    assert!(b8[0].intersect::<Watertight>(&ray).is_some());
+    let tlas = Tlas::build(&[Instance::new(Affine3A::IDENTITY, 0)], &b8).unwrap();
+    assert_eq!(tlas.left_out(), 1);
+    assert!(tlas.is_empty() && tlas.intersect::<Watertight, _, 8>(&b8, &ray).is_none());
+    // And through a transform that scales such a BLAS past `f32::MAX`.
+    let ok = [
+        tris[2],
+        [
+            Vec3::splat(1e38),
+            Vec3::new(1e38, 2e38, 1e38),
+            Vec3::new(2e38, 1e38, 1e38),
+        ],
+    ];
+    let (b2, _) = Bvh2::build(&ok[..], &BuildParams::default()).unwrap();
+    let b8 = vec![strahl::layout::Bvh8::from_bvh2(&b2, &ok[..]).unwrap()];
+    let tlas = Tlas::build(&[Instance::new(Affine3A::from_scale(Vec3::splat(4.0)), 0)], &b8).unwrap();
+    assert_eq!(tlas.left_out(), 1);
+}

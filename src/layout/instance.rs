@@ -337,9 +337,11 @@ fn lanes_union<L: Lane>(b: &AabbLanes<L>) -> Aabb {
 
 /// Grows `lo`/`hi` (per axis, per lane) by the boxes in `b`'s lanes where `take` is positive
 /// (empty lanes skipped), each transformed by `m` and padded by [`PAD`]: all lanes at once, the
-/// lanes reduced once by the caller.
+/// lanes reduced once by the caller. Returns `false` where a box taken does not transform to
+/// finite bounds (an overflow, `inf * 0`): the lane reductions would drop such a lane's NaN, so
+/// the caller must leave the instance out, as a world box beyond the builders' range is.
 #[inline(always)]
-fn grow_world<L: Lane>(lo: &mut [L; 3], hi: &mut [L; 3], m: &Affine3A, b: &AabbLanes<L>, take: L) {
+fn grow_world<L: Lane>(lo: &mut [L; 3], hi: &mut [L; 3], m: &Affine3A, b: &AabbLanes<L>, take: L) -> bool {
     let half = L::splat(0.5);
     let c: [L; 3] = core::array::from_fn(|a| (b.min[a] + b.max[a]) * half);
     let e: [L; 3] = core::array::from_fn(|a| (b.max[a] - b.min[a]) * half);
@@ -364,15 +366,21 @@ fn grow_world<L: Lane>(lo: &mut [L; 3], hi: &mut [L; 3], m: &Affine3A, b: &AabbL
     // reaches near `f32::MAX`). Found in review: padding by `|M c + t|` missed hits of a small
     // box 1,000 units from its origin moved back to the world's origin (`tests/instance.rs`).
     let cp: [L; 3] = core::array::from_fn(|a| c[a].max_l(zero - c[a]) * pad);
+    let mut fine = true;
     for r in 0..3 {
         let mag = cp[0] * L::splat(cols[0][r].abs())
             + cp[1] * L::splat(cols[1][r].abs())
             + cp[2] * L::splat(cols[2][r].abs())
             + L::splat(m.translation[r].abs() * PAD);
         let w = we[r] + we[r] * pad + mag + big;
-        lo[r] = used.select(lo[r].min_l(wc[r] - w), lo[r]);
-        hi[r] = used.select(hi[r].max_l(wc[r] + w), hi[r]);
+        let (a, b) = (wc[r] - w, wc[r] + w);
+        // False for NaN and infinities.
+        let finite = a.ge(L::splat(f32::MIN)) & b.le(L::splat(f32::MAX));
+        fine &= used.bitmask() & !finite.bitmask() == 0;
+        lo[r] = used.select(lo[r].min_l(a), lo[r]);
+        hi[r] = used.select(hi[r].max_l(b), hi[r]);
     }
+    fine
 }
 
 /// The world box of `inst` and its inverse transform, or `None` where the instance is left out.
@@ -398,17 +406,25 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     let (mut lo, mut hi) = ([L::splat(f32::INFINITY); 3], [L::splat(f32::NEG_INFINITY); 3]);
     // 1.0 in the lanes of the root's leaf slots (`N <= 8`: `WideNode::LANES_MATCH`).
     let mut leaf = [0f32; 8];
+    let mut fine = true;
     for (flag, &c) in leaf.iter_mut().zip(&root.child) {
         if c & LEAF_BIT == 0
             && let Some(kid) = blas.nodes.get(c as usize)
         {
-            grow_world(&mut lo, &mut hi, &m, &kid.bounds, L::splat(1.0));
+            fine &= grow_world(&mut lo, &mut hi, &m, &kid.bounds, L::splat(1.0));
         } else if c != EMPTY_CHILD {
             *flag = 1.0;
         }
     }
     if leaf.iter().any(|&x| x != 0.0) {
-        grow_world(&mut lo, &mut hi, &m, &root.bounds, L::load(&leaf[..N]));
+        fine &= grow_world(&mut lo, &mut hi, &m, &root.bounds, L::load(&leaf[..N]));
+    }
+    // A box that overflowed in the transform: its lane would be dropped by the reductions below
+    // (found by the `bvh` fuzz target, seed `crash-tlas-overflowed-lane`: a BLAS box from
+    // -2.5e33 to `f32::MAX`, whose extent overflows, left the instance's world box as its other
+    // box alone, and a hit outside it was culled).
+    if !fine {
+        return None;
     }
     let world = lanes_union(&AabbLanes { min: lo, max: hi });
     // The builders' own rule (extent and `min + max` finite), so that every instance the TLAS
