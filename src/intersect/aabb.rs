@@ -139,6 +139,24 @@ impl<L: Lane> AabbLanes<L> {
         let f = |v: &[L; 3]| glam::Vec3::new(v[0].lane(i), v[1].lane(i), v[2].lane(i));
         Aabb::new(f(&self.min), f(&self.max))
     }
+
+    /// The union of every lane's box (empty lanes hold the empty box, which the lane
+    /// reductions skip; all lanes empty give [`Aabb::EMPTY`]).
+    ///
+    /// ```
+    /// use strahl::{Aabb, Vec3, intersect::AabbX8};
+    /// let (a, b) = (Aabb::new(Vec3::ZERO, Vec3::ONE), Aabb::new(Vec3::splat(-2.0), Vec3::splat(-1.0)));
+    /// assert_eq!(AabbX8::from_boxes(&[a, Aabb::EMPTY, b]).union(), a.union(&b));
+    /// assert_eq!(AabbX8::empty().union(), Aabb::EMPTY);
+    /// ```
+    #[inline]
+    pub fn union(&self) -> Aabb {
+        let (b, t) = (&self.min, &self.max);
+        Aabb::new(
+            glam::Vec3::new(b[0].min_lane(), b[1].min_lane(), b[2].min_lane()),
+            glam::Vec3::new(t[0].max_lane(), t[1].max_lane(), t[2].max_lane()),
+        )
+    }
 }
 
 /// Scalar reference: the entry distance if `ray` hits `b`, else `None`.

@@ -325,16 +325,6 @@ fn collapse(bvh: &Bvh2) -> Vec<TlasNode> {
 /// Relative padding of an instance's world box against the rounding of its transform.
 const PAD: f32 = 1.0 / 65536.0;
 
-/// The union of the boxes in `b`'s lanes.
-#[inline]
-fn lanes_union<L: Lane>(b: &AabbLanes<L>) -> Aabb {
-    // Empty slots hold the empty box (+inf min, -inf max), which the reductions skip.
-    Aabb::new(
-        Vec3::new(b.min[0].min_lane(), b.min[1].min_lane(), b.min[2].min_lane()),
-        Vec3::new(b.max[0].max_lane(), b.max[1].max_lane(), b.max[2].max_lane()),
-    )
-}
-
 /// Grows `lo`/`hi` (per axis, per lane) by the boxes in `b`'s lanes where `take` is positive
 /// (empty lanes skipped), each transformed by `m` and padded by [`PAD`]: all lanes at once, the
 /// lanes reduced once by the caller. Returns `false` where a box taken does not transform to
@@ -396,7 +386,7 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     }
     let blas = blases.get(inst.blas as usize)?;
     let root = blas.nodes.first()?;
-    let b = lanes_union(&root.bounds);
+    let b = root.bounds.union();
     if !(b.min.is_finite() && b.max.is_finite()) || b.min.cmpgt(b.max).any() {
         return None;
     }
@@ -426,7 +416,7 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     if !fine {
         return None;
     }
-    let world = lanes_union(&AabbLanes { min: lo, max: hi });
+    let world = AabbLanes { min: lo, max: hi }.union();
     // The builders' own rule (extent and `min + max` finite), so that every instance the TLAS
     // leaves out is counted here.
     usable_box(world.min, world.max).then_some((world, inv))
@@ -734,7 +724,7 @@ impl Tlas {
                 } else if c & LEAF_BIT != 0 {
                     boxes[(c & !LEAF_BIT) as usize]
                 } else {
-                    lanes_union(&self.nodes[c as usize].bounds)
+                    self.nodes[c as usize].bounds.union()
                 };
             }
             self.nodes[n].bounds = AabbLanes::from_boxes(&b);
@@ -1237,7 +1227,7 @@ impl Tlas {
         let Some(root) = self.nodes.first() else {
             return 0.0;
         };
-        let b = lanes_union(&root.bounds);
+        let b = root.bounds.union();
         (b.max - b.min).max_element().max(0.0)
     }
 

@@ -225,10 +225,8 @@ pub(super) fn kept(tri: &Triangle) -> bool {
 
 /// The union of a node's child boxes (empty slots hold the empty box).
 fn node_box<L: Lane, const N: usize>(node: &WideNode<L, N>) -> (Vec3, Vec3) {
-    let b = &node.bounds;
-    let lo = Vec3::new(b.min[0].min_lane(), b.min[1].min_lane(), b.min[2].min_lane());
-    let hi = Vec3::new(b.max[0].max_lane(), b.max[1].max_lane(), b.max[2].max_lane());
-    (lo, hi)
+    let b = node.bounds.union();
+    (b.min, b.max)
 }
 
 /// Sets child `slot`'s box of `node`.

@@ -445,11 +445,8 @@ pub(crate) fn root_extent<L: Lane, const N: usize>(bvh: BvhWideRef<'_, L, N>) ->
     let Some(root) = bvh.nodes.first() else {
         return 0.0;
     };
-    let mut extent = 0f32;
-    for a in 0..3 {
-        extent = extent.max(root.bounds.max[a].max_lane() - root.bounds.min[a].min_lane());
-    }
-    extent
+    let b = root.bounds.union();
+    (b.max - b.min).max_element().max(0.0)
 }
 
 /// The path for `rays` (1 to 8 of them): origins within
