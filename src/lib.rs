@@ -65,7 +65,7 @@
 //! | stage | knob | where |
 //! |---|---|---|
 //! | slab test | conservative far bound `far + \|far\| 2 gamma(3)` (default), or the fast test by type | [`intersect::aabb::FAR_SLACK`], [`traverse::Fast`] |
-//! | batches | each group of 8 rays as a packet, interleaved walks, a ray stream or one at a time, chosen by its rays; streams only on trees up to a size | [`layout::BvhWide::intersect_batch`], [`traverse::wide::STREAM_MAX_BYTES`] |
+//! | batches | each group of 8 rays as a packet, two interleaved walks (closest hits) or one walk at a time, chosen by its rays; ray streams on request | [`layout::BvhWide::intersect_batch`], [`traverse::wide::occluded_batch_stream`] |
 //! | incoherent batches | trace in the Morton order of the rays' origins | [`traverse::order::RayOrder`], [`layout::BvhWide::occluded_batch_reordered`] |
 //! | Morton codes | bits per axis (10 or 21), quantisation bounds | [`geometry::morton::MortonQuantizer`] |
 //! | BVH2 build | strategy, `C_T`, `C_I`, leaf sizes, bins, binned axes, Morton bits, depth bound | [`build::BuildParams`] (`fastest`, `fast`, `balanced`, `quality`, `median`) |

@@ -3,8 +3,11 @@
 //! (`benches/common`, 131,072 from surface points to random points in the box) through the BVH8
 //! of `BuildParams::default()` on sphereflakes of 3k to 1M triangles and the bunny, three ways:
 //! one `occluded` per ray, `occluded_batch_incoherent` (two walks interleaved) and
-//! `occluded_batch_stream` (64 rays walking together); best of 5 rounds taking turns. What
-//! `wide::occluded_batch` picks for scattered rays by the tree's size comes from this.
+//! `occluded_batch_stream` (64 rays walking together); best of 5 rounds taking turns. Since the
+//! single walk keeps its state in registers, `occluded_batch_incoherent` is that walk ray by
+//! ray (its second column now measures the same walk again: the spread between the two is the
+//! noise); the streams won on small trees on an Intel Xeon and lost on every tree on an AMD EPYC
+//! (Zen 1), so `wide::occluded_batch` walks scattered rays one at a time.
 
 #[path = "../benches/common/mod.rs"]
 mod common;

@@ -156,9 +156,9 @@ pub(crate) fn intersect_from_filtered<T: TriangleTest, L: Lane, const N: usize, 
     ClosestWalk::<STACK>::new(bvh, start).finish::<T, L, N, F>(bvh, r, f)
 }
 
-/// One ray's closest-hit walk, advanced one node or leaf at a time ([`step`](Self::step)), as
-/// [`AnyHitWalk`]: children pushed near to far, the nearest on top, and entries beyond the closest
-/// hit so far skipped when popped.
+/// One ray's closest-hit walk, advanced one node or leaf at a time ([`step`](Self::step)), so
+/// that two rays' walks can run interleaved ([`intersect_batch_incoherent`]): children pushed near
+/// to far, the nearest on top, and entries beyond the closest hit so far skipped when popped.
 struct ClosestWalk<const S: usize> {
     stack: Stack<S>,
     cur: u32,
@@ -273,8 +273,9 @@ impl<const S: usize> ClosestWalk<S> {
 }
 
 /// [`intersect`] for every ray of a batch: `hits[i]` for `rays[i]` (the shorter length wins), the
-/// same hits as one call per ray, two walks interleaved as in [`occluded_batch_incoherent`]: for
-/// rays that go their own ways (diffuse bounces, ambient occlusion); for coherent rays (a camera's)
+/// same hits as one call per ray, two rays' walks interleaved (one node or leaf of each in turn,
+/// a walk that ends taking the next ray, so that the processor overlaps the cache misses of one
+/// walk with the work of the other): for rays that go their own ways (diffuse bounces, ambient occlusion); for coherent rays (a camera's)
 /// call [`intersect`] per ray or use the [packets](super::packet).
 ///
 /// ```
@@ -430,8 +431,8 @@ pub(crate) enum Group {
     /// tile's hits to a light): one packet of 8 ([`packet`](super::packet), interval culling).
     Packet,
     /// Origins apart (diffuse bounces and shadow rays from scattered points): the whole run of
-    /// such groups as walks two at a time, interleaved ([`intersect_batch_incoherent`]), or for
-    /// any-hit rays through a small tree as ray streams ([`occluded_batch_stream`]).
+    /// such groups as [`intersect_batch_incoherent`] (walks two at a time, interleaved) or
+    /// [`occluded_batch_incoherent`] (one walk at a time).
     Scattered,
     /// Origins close together but directions apart (ambient occlusion from one point): one ray
     /// at a time, each finding the nodes the last one left in the cache.
@@ -564,9 +565,8 @@ pub fn intersect_batch<T: TriangleTest, L: Lane, const N: usize>(
 /// Any-hit answers of a batch of rays, any mix of coherent and incoherent ones: `occluded[i]` for
 /// `rays[i]`, the same answers as one [`occluded`] per ray. Groups of 8 take the paths of
 /// [`intersect_batch`]: packets ([`packet::occluded8`](super::packet::occluded8)), one ray at a
-/// time, or, for runs of rays from scattered origins, ray streams ([`occluded_batch_stream`]) on
-/// trees up to [`STREAM_MAX_BYTES`] and the interleaved walks of [`occluded_batch_incoherent`]
-/// on larger ones.
+/// time, also for runs of rays from scattered origins ([`occluded_batch_incoherent`], which says
+/// why neither interleaved walks nor [ray streams](occluded_batch_stream) are used).
 ///
 /// ```
 /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Watertight, wide}};
@@ -591,20 +591,13 @@ pub fn occluded_batch<T: TriangleTest, L: Lane, const N: usize>(
     rays: &[Ray],
     occluded: &mut [bool],
 ) {
-    let streams = stream_fits(bvh);
     by_groups::<T, _>(
         rays,
         occluded,
         root_extent(bvh),
         |r, o| super::packet::occluded_packet::<T, L, N, f32x8, 8>(bvh, r, o, super::packet::DEFAULT_SWITCH),
         |r| self::occluded::<T, L, N>(bvh, r),
-        |r, o| {
-            if streams {
-                occluded_batch_stream::<T, L, N>(bvh, r, o);
-            } else {
-                occluded_batch_incoherent::<T, L, N>(bvh, r, o);
-            }
-        },
+        |r, o| occluded_batch_incoherent::<T, L, N>(bvh, r, o),
     );
 }
 
@@ -690,12 +683,12 @@ fn occluded_from_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter
     any_hit_walk::<STACK, T, L, N, F>(bvh, start, r, f)
 }
 
-/// One ray's whole any-hit walk in one loop, its state in locals (registers), where
-/// [`AnyHitWalk`] (the interleaved batches' form, advanced a step at a time) keeps it in memory:
-/// the same visits ([`any_hit_visit`]), so the same answer on every view.
-// PERF: against `AnyHitWalk` stepped to its end (BVH8, 131,072 shadow rays; Intel Xeon; the
-// two builds run alternately, each run's best of 4, the best of 6 runs): 1.01-1.05x on the 1M
-// sphereflake, 1.00-1.06x on the bunny (two such comparisons; the machine's noise is about 5%).
+/// One ray's whole any-hit walk in one loop, its state in locals (registers); every any-hit path
+/// of the wide BVHs but the ray streams walks this way.
+// PERF: against the same visits as a walk object stepped to its end (its state in memory, the
+// form two interleaved walks needed; BVH8, 131,072 shadow rays; Intel Xeon; the two builds run
+// alternately, each run's best of 4, the best of 6 runs): 1.01-1.05x on the 1M sphereflake,
+// 1.00-1.06x on the bunny (two such comparisons; the machine's noise is about 5%).
 // The same loop for closest hits, also with the nearest child visited without the stack,
 // measured 0.97-1.02x on primary and diffuse rays: not kept.
 #[inline(always)]
@@ -781,48 +774,6 @@ fn any_hit_visit<const S: usize, T: TriangleTest, L: Lane, const N: usize, F: Hi
         }
     }
     AnyHitNext::Pop
-}
-
-/// One ray's any-hit walk, advanced one node or leaf at a time ([`step`](Self::step)), so that
-/// several rays' walks can run interleaved: their loads are independent, and the processor
-/// overlaps the cache misses of one with the work of another.
-struct AnyHitWalk<const S: usize> {
-    stack: CodeStack<S>,
-    cur: u32,
-    budget: usize,
-    /// `Some(answer)` once the walk has ended.
-    done: Option<bool>,
-}
-
-impl<const S: usize> AnyHitWalk<S> {
-    #[inline(always)]
-    fn new<L, const N: usize>(bvh: BvhWideRef<'_, L, N>, r: &PreparedRay) -> Self {
-        let empty = r.is_empty() || bvh.nodes.is_empty();
-        Self {
-            stack: CodeStack::new(),
-            cur: 0,
-            budget: bvh.nodes.len(),
-            done: if empty { Some(false) } else { None },
-        }
-    }
-
-    /// Visits the current node or leaf, then takes the next entry from the stack.
-    #[inline(always)]
-    fn step<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
-        &mut self,
-        bvh: BvhWideRef<'_, L, N>,
-        r: &PreparedRay,
-        f: &mut F,
-    ) {
-        match any_hit_visit::<S, T, L, N, F>(bvh, r, f, self.cur, &mut self.stack, &mut self.budget) {
-            AnyHitNext::Visit(code) => self.cur = code,
-            AnyHitNext::Answer(hit) => self.done = Some(hit),
-            AnyHitNext::Pop => match self.stack.pop() {
-                None => self.done = Some(false),
-                Some(code) => self.cur = code,
-            },
-        }
-    }
 }
 
 /// Rays in one any-hit stream ([`occluded_stream`]): one bit each in a `u64` mask.
@@ -936,28 +887,6 @@ fn occluded_stream<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_,
     blocked
 }
 
-/// Trees up to this size (nodes and packs) take [`occluded_batch_stream`] for scattered rays in
-/// [`occluded_batch`], larger ones [`occluded_batch_incoherent`]. Measured
-/// (`tests/stream_speed.rs`, shadow rays, BVH8, Intel Xeon with 2 MB of L2 per core, best of 5):
-/// against one call per ray, streams 1.09-1.16x and interleaved walks 0.97-0.98x on trees of
-/// 0.2 MB (the bunny, a 3,200-triangle sphereflake); 0.99-1.02x against 0.99x at 0.8-2 MB;
-/// 0.90-0.94x against 1.07-1.13x at 7.8-70 MB, where the misses of interleaved walks overlap.
-///
-/// ```
-/// use strahl::{build::{Bvh2, BuildParams}, layout::Bvh8, traverse::wide::STREAM_MAX_BYTES};
-/// let tris = strahl::scene::icosphere(3).to_soup();
-/// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
-/// let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
-/// assert!(b8.memory_bytes() <= STREAM_MAX_BYTES); // 1,280 triangles: scattered rays as streams
-/// ```
-pub const STREAM_MAX_BYTES: usize = 2 << 20;
-
-/// `true` if `bvh` is small enough for ray streams ([`STREAM_MAX_BYTES`]).
-#[inline]
-fn stream_fits<L, const N: usize>(bvh: BvhWideRef<'_, L, N>) -> bool {
-    size_of_val(bvh.nodes) + size_of_val(bvh.packs) <= STREAM_MAX_BYTES
-}
-
 /// [`occluded`] for every ray of a batch, 64 rays at a time walking the tree together: `out[i]`
 /// for `rays[i]` (the shorter length wins), the same answers as one call per ray.
 ///
@@ -965,11 +894,11 @@ fn stream_fits<L, const N: usize>(bvh: BvhWideRef<'_, L, N>) -> bool {
 /// architectures", 2015; Embree's `rtcOccluded1M`): each stack entry carries the mask of the
 /// rays that entered it, so a node is loaded once for all of them and tested against each with
 /// its single-ray slab test; a leaf's packs are tested with each entering ray's single-ray
-/// kernel; rays retire when blocked. It pays where the rays share nodes and the tree sits
-/// in the cache: shadow rays from scattered points through the bunny's BVH8, 1.09-1.16x one call
-/// per ray; on trees larger than the cache the interleaved walks of
-/// [`occluded_batch_incoherent`] do better ([`STREAM_MAX_BYTES`], which [`occluded_batch`]
-/// follows).
+/// kernel; rays retire when blocked. Whether it pays depends on the processor, so
+/// [`occluded_batch`] does not pick it: shadow rays from scattered points through BVH8s of 0.2 to
+/// 2 MB (`tests/stream_speed.rs`) took 1.09-1.16x less time than one call per ray on an Intel
+/// Xeon (2 MB of L2 per core) but 1.19-1.35x *more* on an AMD EPYC of the first Zen generation,
+/// and more on both on trees larger than the cache. Measure it on yours.
 ///
 /// ```
 /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Moller, wide}};
@@ -1008,10 +937,10 @@ pub fn occluded_batch_stream<T: TriangleTest, L: Lane, const N: usize>(
 /// scattered points): `out[i]` for `rays[i]` (the shorter length wins), the same answers as one
 /// call per ray.
 ///
-/// Two rays' walks run interleaved, one node or leaf of each in turn, and a walk that ends takes
-/// the next ray: the two walks' loads are independent, so the processor overlaps the cache
-/// misses of one with the work of the other. Coherent rays (neighbours that visit the same
-/// nodes) gain nothing from this.
+/// One walk at a time, each [`occluded`]'s. Unlike closest-hit walks
+/// ([`intersect_batch_incoherent`]), any-hit walks are not interleaved: since the single walk
+/// keeps its state in registers, two interleaved walks (state in memory) took longer on every
+/// tree and machine measured.
 ///
 /// ```
 /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Moller, wide}};
@@ -1028,10 +957,12 @@ pub fn occluded_batch_stream<T: TriangleTest, L: Lane, const N: usize>(
 /// }
 /// assert_eq!(out, [false, true, true, true, false]);
 /// ```
-// PERF: BVH8, 262,144 rays, best of 3 x 4 rounds taking turns (Intel Xeon, 2026-12-04): against
-// one call per ray, any-hit shadow rays 1.12x (bunny) and 1.18x (1M sphereflake) faster, diffuse
-// directions 1.26x and 1.39x. Three or four walks at a time (in arrays) were slower on the bunny
-// and no faster on the sphereflake.
+// PERF: two walks interleaved measured 1.12x (bunny) and 1.18x (1M sphereflake) faster than one
+// call per ray on shadow rays (Intel Xeon, 2026-12-04), but after the single walk kept its state
+// in registers (2026-12-06) 0.92x and 0.90x (the trace bench's `bvh8_incoherent` against `bvh8`),
+// and on an AMD EPYC (Zen 1; `tests/stream_speed.rs`, 131,072 shadow rays, best of 5) 0.75-0.91x
+// on BVH8s of 0.2 to 70 MB; in Morton order (`occluded_batch_ordered`) 0.76x (bunny) and 0.86x
+// (1M sphereflake). Three or four walks at a time (in arrays) were slower still (Xeon).
 pub fn occluded_batch_incoherent<T: TriangleTest, L: Lane, const N: usize>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[Ray],
@@ -1061,25 +992,11 @@ pub fn occluded_batch_incoherent_filtered<T: TriangleTest, L: Lane, const N: usi
     out: &mut [bool],
     mut filter: F,
 ) {
-    let start = |i: usize| {
-        let r = prepare::<T>(&rays[i]);
-        let w = AnyHitWalk::<STACK>::new(bvh, &r);
-        (i, r, w)
-    };
     let n = rays.len().min(out.len());
-    interleave2(
-        0..n,
-        start,
-        |(i, r, w)| {
-            let mut f = InBatch {
-                f: &mut filter,
-                ray: *i,
-            };
-            w.step::<T, L, N, _>(bvh, r, &mut f)
-        },
-        |(_, _, w)| w.done,
-        |i, o| out[i] = o,
-    );
+    for (i, (o, ray)) in out[..n].iter_mut().zip(&rays[..n]).enumerate() {
+        let mut f = InBatch { f: &mut filter, ray: i };
+        *o = occluded_from_filtered::<T, L, N, _>(bvh, 0, &prepare::<T>(ray), &mut f);
+    }
 }
 
 /// [`occluded_batch_incoherent`] in the order `order`: for each entry `i` of `order`, `out[i]`
@@ -1106,19 +1023,11 @@ pub fn occluded_batch_ordered<T: TriangleTest, L: Lane, const N: usize>(
     order: &[u32],
     out: &mut [bool],
 ) {
-    let start = |ray: &Ray| {
-        let r = prepare::<T>(ray);
-        let w = AnyHitWalk::<STACK>::new(bvh, &r);
-        (r, w)
-    };
+    // One walk at a time, as `intersect_batch_ordered` (see `occluded_batch_incoherent`).
     gather_ordered(rays, order, out.len(), |chunk, slots| {
-        interleave2(
-            0..chunk.len(),
-            |k| start(&chunk[k]),
-            |(r, w)| w.step::<T, L, N, _>(bvh, r, &mut AcceptAll),
-            |(_, w)| w.done,
-            |k, o| out[slots[k] as usize] = o,
-        );
+        for (r, &i) in chunk.iter().zip(slots) {
+            out[i as usize] = occluded::<T, L, N>(bvh, r);
+        }
     });
 }
 
@@ -1307,7 +1216,7 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
 
     /// Closest hits of a batch: `hits[i]` for `rays[i]` (the shorter length wins), those of one
     /// [`intersect`](Self::intersect) per ray (of two triangles tied at a hit, possibly the
-    /// other); groups of 8 coherent rays as packets, scattered rays interleaved
+    /// other); groups of 8 coherent rays as packets, scattered rays as two walks interleaved
     /// ([`intersect_batch`]).
     ///
     /// ```
@@ -1368,8 +1277,8 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
     }
 
     /// Any-hit answers of a batch: `occluded[i]` for `rays[i]`, the same as one
-    /// [`occluded`](Self::occluded) per ray; groups of 8 coherent rays as packets, scattered rays
-    /// as ray streams (small trees) or interleaved walks ([`occluded_batch`]).
+    /// [`occluded`](Self::occluded) per ray; groups of 8 coherent rays as packets, the others one
+    /// at a time ([`occluded_batch`]).
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
@@ -1563,7 +1472,7 @@ impl<L: Lane, const N: usize> crate::layout::BvhWide<L, N> {
 
     /// [`occluded_batch_reordered`](Self::occluded_batch_reordered) on `threads` threads (`std`),
     /// as [`intersect_batch_reordered_par`](Self::intersect_batch_reordered_par); each chunk's
-    /// walks two at a time, interleaved.
+    /// walks one at a time.
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::Watertight};
