@@ -56,6 +56,8 @@ fn never_raises_the_cost_and_keeps_leaves() {
             assert_eq!(leaves(&bvh), leaves_before, "{name}/{bname}: leaves changed");
             assert_eq!(bvh.prim_indices, prims);
             assert_eq!(bvh.nodes.len(), 2 * leaves_before.len() - 1);
+            // No search on a builder's tree comes near the budget.
+            assert_eq!(stats.cut, 0, "{name}/{bname}");
             if bname == "fastest" || bname == "median" {
                 // Morton and median trees leave room: the pass must find some of it.
                 assert!(
@@ -65,6 +67,56 @@ fn never_raises_the_cost_and_keeps_leaves() {
             }
         }
     }
+}
+
+/// Sum of the half areas of the interior nodes below `max` on every axis, in f64 (the SAH cost of
+/// that part of the tree, without the root's area, which a far outlier makes so large that the
+/// rest vanishes from `sah_cost` in f32).
+fn interior_area_below(b: &Bvh2, max: f32) -> f64 {
+    b.nodes
+        .iter()
+        .filter(|n| !n.is_leaf() && n.max.iter().all(|&m| m < max))
+        .map(|n| {
+            let d = (Vec3::from(n.max) - Vec3::from(n.min)).as_dvec3();
+            d.x * d.y + d.y * d.z + d.z * d.x
+        })
+        .sum()
+}
+
+/// A tree whose boxes overlap wholesale (the LBVH of triangles in a unit cube beside one 10^7
+/// away: the cube's triangles share one Morton cell, so the tree over them follows their input
+/// order) leaves a search nothing to prune: each one stops at `REINSERT_SEARCH_BUDGET` visits
+/// (unbounded, 3 rounds over such a tree of 100,000 triangles took 84 s) with the best place
+/// seen, and the pass still lowers the cost without raising it anywhere.
+#[test]
+fn searches_stop_at_the_budget_where_boxes_overlap() {
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut f = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut tris: Vec<Triangle> = (0..20_000)
+        .map(|_| {
+            let p = Vec3::new(f(), f(), f());
+            [
+                p,
+                p + Vec3::new(f(), f(), f()) * 0.01,
+                p + Vec3::new(f(), f(), f()) * 0.01,
+            ]
+        })
+        .collect();
+    let far = Vec3::splat(1e7);
+    tris.push([far, far + Vec3::X, far + Vec3::Y]);
+    let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::fastest()).unwrap();
+    let (before, leaves_before) = (interior_area_below(&bvh, 2.0), leaves(&bvh));
+    let stats = bvh.optimize_reinsertion(&ALL, 64).unwrap();
+    bvh.validate(&tris[..]).unwrap();
+    assert_eq!(leaves(&bvh), leaves_before);
+    assert!(stats.cut > 1000, "{stats:?}");
+    let after = interior_area_below(&bvh, 2.0);
+    assert!(stats.moved > 0 && after < before * 0.9, "{before} -> {after}");
 }
 
 #[test]

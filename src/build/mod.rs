@@ -338,7 +338,7 @@ pub use params::{
 };
 pub(crate) use prims::usable_box;
 pub use prims::{MAX_PRIMITIVES, Primitives};
-pub use reinsert::{ReinsertParams, ReinsertStats};
+pub use reinsert::{REINSERT_SEARCH_BUDGET, ReinsertParams, ReinsertStats};
 pub use rotate::RotationStats;
 pub use spatial::{SpatialSplits, clip_triangle};
 pub use treelet::TreeletStats;
