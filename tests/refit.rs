@@ -13,7 +13,7 @@ use strahl::layout::{BvhWide, EMPTY_CHILD, LEAF_BIT, leaf_packs};
 use strahl::math::{Lane, f32x4, f32x8};
 use strahl::scene::{self, Rng};
 use strahl::traverse::{Moller, Watertight, intersect_brute_force, occluded_brute_force};
-use strahl::{Ray, Vec3};
+use strahl::{Hit, Ray, Vec3};
 
 /// `true` if a refit keeps `t` in the tree: the builders' rule (`Primitives`, `Bvh2::refit`),
 /// finite vertices and a box whose extent and `min + max` are finite (no coordinate beyond about
@@ -98,10 +98,58 @@ fn check_boxes<L: Lane, const N: usize, P: Triangles + ?Sized>(
     (lo, hi)
 }
 
+/// Brute-force answers over the kept triangles of a moved soup on mixed rays, computed once per
+/// motion and shared by every tree refitted to it.
+struct Truth {
+    kept: Vec<Triangle>,
+    rays: Vec<Ray>,
+    watertight: Vec<Option<Hit>>,
+    moller: Vec<Option<Hit>>,
+    any: Vec<bool>,
+}
+
+impl Truth {
+    fn new(tris: &[Triangle]) -> Self {
+        // Rays over the kept triangles (mixed_rays skips nothing: it needs some triangles).
+        let finite: Vec<Triangle> = tris.iter().copied().filter(kept).collect();
+        let kept = kept_only(tris);
+        let rays = if finite.is_empty() {
+            vec![Ray::new(Vec3::splat(-1.0), Vec3::ONE)]
+        } else {
+            mixed_rays(&finite, 400, 3)
+        };
+        let watertight = rays
+            .iter()
+            .map(|r| intersect_brute_force::<Watertight, _>(&kept[..], r))
+            .collect();
+        let moller = rays
+            .iter()
+            .map(|r| intersect_brute_force::<Moller, _>(&kept[..], r))
+            .collect();
+        let any = rays
+            .iter()
+            .map(|r| occluded_brute_force::<Watertight, _>(&kept[..], r))
+            .collect();
+        Self {
+            kept,
+            rays,
+            watertight,
+            moller,
+            any,
+        }
+    }
+}
+
 /// Refits `bvh` to `tris` and checks it: the left-out count, the boxes, each triangle of the
 /// tree seen once, and closest and any hits against brute force over the kept triangles of
-/// `tris` on mixed rays.
-fn refit_and_check<L: Lane, const N: usize>(bvh: &mut BvhWide<L, N>, tris: &[Triangle], n_prims: usize, what: &str) {
+/// `tris` on mixed rays (`truth`, from `Truth::new(tris)`).
+fn refit_and_check<L: Lane, const N: usize>(
+    bvh: &mut BvhWide<L, N>,
+    tris: &[Triangle],
+    n_prims: usize,
+    truth: &Truth,
+    what: &str,
+) {
     let want_out = (0..n_prims).filter(|&p| !tris.get(p).is_some_and(kept)).count();
     assert_eq!(bvh.refit(tris), want_out, "{what}");
     let mut seen = Vec::new();
@@ -114,35 +162,11 @@ fn refit_and_check<L: Lane, const N: usize>(bvh: &mut BvhWide<L, N>, tris: &[Tri
         (0..n_prims as u32).collect::<Vec<_>>(),
         "{what}: each triangle once"
     );
-    // Rays over the kept triangles (mixed_rays skips nothing: it needs some triangles).
-    let finite: Vec<Triangle> = tris.iter().copied().filter(kept).collect();
-    let kept_tris = kept_only(tris);
-    let tris = &kept_tris[..];
-    let rays = if finite.is_empty() {
-        vec![Ray::new(Vec3::splat(-1.0), Vec3::ONE)]
-    } else {
-        mixed_rays(&finite, 400, 3)
-    };
-    for ray in &rays {
-        same(
-            bvh.intersect::<Watertight>(ray),
-            intersect_brute_force::<Watertight, _>(tris, ray),
-            tris,
-            ray,
-            what,
-        );
-        same(
-            bvh.intersect::<Moller>(ray),
-            intersect_brute_force::<Moller, _>(tris, ray),
-            tris,
-            ray,
-            what,
-        );
-        assert_eq!(
-            bvh.occluded::<Watertight>(ray),
-            occluded_brute_force::<Watertight, _>(tris, ray),
-            "{what}: {ray:?}"
-        );
+    let kept = &truth.kept[..];
+    for (k, ray) in truth.rays.iter().enumerate() {
+        same(bvh.intersect::<Watertight>(ray), truth.watertight[k], kept, ray, what);
+        same(bvh.intersect::<Moller>(ray), truth.moller[k], kept, ray, what);
+        assert_eq!(bvh.occluded::<Watertight>(ray), truth.any[k], "{what}: {ray:?}");
     }
 }
 
@@ -180,6 +204,17 @@ fn motions(tris: &[Triangle], seed: u64) -> Vec<(&'static str, Vec<Triangle>)> {
 }
 
 fn check_width<L: Lane, const N: usize>(tris: &[Triangle], name: &str) {
+    let cases: Vec<_> = motions(tris, 5)
+        .into_iter()
+        .map(|(motion, moved)| {
+            let truth = Truth::new(&moved);
+            (motion, moved, truth)
+        })
+        .collect();
+    let half_truth: Vec<(Ray, Option<Hit>)> = mixed_rays(tris, 300, 9)
+        .into_iter()
+        .map(|r| (r, intersect_brute_force::<Watertight, _>(&tris[..tris.len() / 2], &r)))
+        .collect();
     for (pname, p) in [("default", BuildParams::default()), ("fastest", BuildParams::fastest())] {
         let (b2, _) = Bvh2::build(tris, &p).unwrap();
         let trees = [
@@ -196,9 +231,9 @@ fn check_width<L: Lane, const N: usize>(tris: &[Triangle], name: &str) {
                 identical(&same_tree, &tree),
                 "{what}: a refit without motion changed the tree"
             );
-            for (motion, moved) in motions(tris, 5) {
+            for (motion, moved, truth) in &cases {
                 let mut t = tree.clone();
-                refit_and_check(&mut t, &moved, tris.len(), &format!("{what} / {motion}"));
+                refit_and_check(&mut t, moved, tris.len(), truth, &format!("{what} / {motion}"));
                 // And back: the very tree of the start again.
                 assert_eq!(t.refit(tris), 0);
                 assert!(
@@ -214,15 +249,8 @@ fn check_width<L: Lane, const N: usize>(tris: &[Triangle], name: &str) {
             if !t.is_empty() {
                 check_boxes(&t, half, 0, &mut seen);
             }
-            let rays = mixed_rays(tris, 300, 9);
-            for ray in &rays {
-                same(
-                    t.intersect::<Watertight>(ray),
-                    intersect_brute_force::<Watertight, _>(half, ray),
-                    half,
-                    ray,
-                    &what,
-                );
+            for (ray, want) in &half_truth {
+                same(t.intersect::<Watertight>(ray), *want, half, ray, &what);
             }
         }
     }
