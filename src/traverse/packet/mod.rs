@@ -54,6 +54,7 @@ pub(crate) mod stack;
 mod tile;
 mod wide;
 
+#[cfg(feature = "alloc")]
 pub(crate) use wide::BoxPacket;
 
 /// Sixteen `f32` lanes (`wide`'s type): one AVX-512 register, or two [`f32x8`] halves.

@@ -276,6 +276,7 @@ fn lanes_of<R: Lane, const K: usize>(rays: &[Ray]) -> (R, Slabs<R>) {
 /// has the same direction signs, the packet's bounding interval, so that a node's four boxes are
 /// culled with one interval test for the whole packet (Wald, Boulos and Shirley 2007) instead of
 /// one slab test per lane.
+#[cfg(feature = "alloc")]
 pub(crate) struct BoxPacket {
     p: Slabs<crate::math::f32x8>,
     active: u32,
@@ -284,6 +285,7 @@ pub(crate) struct BoxPacket {
     iv: Option<(Interval, [bool; 3], [bool; 3])>,
 }
 
+#[cfg(feature = "alloc")]
 impl BoxPacket {
     /// The packet of `rays` (at most 8; lanes past them, and invalid rays, are inactive).
     #[inline(always)]
