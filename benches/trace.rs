@@ -9,16 +9,17 @@
 //! the same triangles (the peers' BVHs with strahl's scalar triangle test; Embree its own), and
 //! their hit counts are checked against each other before timing.
 //!
-//! `bvh8_incoherent` and `bvh8_reordered` are the batch forms for incoherent rays (two walks
-//! interleaved; then also traced in the Morton order of the rays' origins, the order's
-//! computation included); `embree_*_reordered` runs Embree over the rays in that same order.
+//! `bvh8_incoherent` and `bvh8_reordered` are the batch forms for incoherent rays (closest hits
+//! as two walks interleaved, any hits one walk at a time; `bvh8_reordered` traces them in the
+//! Morton order of the rays' origins, one walk at a time, the order's computation included); `embree_*_reordered` runs Embree over the rays in that same order.
 //! `bvh8_fast` is BVH8 with the fast slab test (`traverse::Fast<Moller>`, Embree's default form;
 //! not conservative). `embree_robust_*` is Embree's scene built with `RTC_SCENE_FLAG_ROBUST` (robust traversal, as
 //! strahl's slab test always is; Embree's default trades that for speed). `bvh8_spatial` is BVH8
 //! over the spatial-split tree (`Bvh2::build_spatial`, default knobs); its peer is
 //! `embree_high_*`, Embree's scene at `RTC_BUILD_QUALITY_HIGH` (its spatial-split build).
 //! `bvh8_batch` is the general batch call (`BvhWide::intersect_batch`/`occluded_batch`: packets
-//! of 8 for coherent groups, interleaved walks for scattered rays, decided per group), on streams
+//! of 8 for coherent groups, scattered rays as two interleaved walks for closest hits and one walk
+//! at a time for any hits, decided per group), on streams
 //! of 256 rays; its peer is Embree's stream API, `embree_rtcIntersect1M`/`embree_rtcOccluded1M`
 //! (256 rays a call, the context flagged coherent for the camera rays, incoherent otherwise).
 //!

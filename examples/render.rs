@@ -95,9 +95,8 @@ impl Tracer for Flat {
         }
     }
     fn occluded(&self, rays: &[Ray], out: &mut [bool]) {
-        // One ray at a time: a pixel's AO rays leave one point, so they are coherent, and the
-        // interleaved walks of `occluded_batch_incoherent` (for scattered rays) measured
-        // 1.07-1.2x slower here (the bunny, the sphereflake, the cut-out bunny; two runs each,
+        // One ray at a time: a pixel's AO rays leave one point, so they are coherent, and two
+        // interleaved any-hit walks (which the batches no longer use) measured 1.07-1.2x slower here (the bunny, the sphereflake, the cut-out bunny; two runs each,
         // 2 threads).
         self.bvh.occluded_batch::<Watertight>(rays, out);
     }

@@ -111,12 +111,17 @@ fn searches_stop_at_the_budget_where_boxes_overlap() {
     tris.push([far, far + Vec3::X, far + Vec3::Y]);
     let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::fastest()).unwrap();
     let (before, leaves_before) = (interior_area_below(&bvh, 2.0), leaves(&bvh));
+    let whole_before = interior_area_below(&bvh, f32::INFINITY);
     let stats = bvh.optimize_reinsertion(&ALL, 64).unwrap();
     bvh.validate(&tris[..]).unwrap();
     assert_eq!(leaves(&bvh), leaves_before);
     assert!(stats.cut > 1000, "{stats:?}");
     let after = interior_area_below(&bvh, 2.0);
     assert!(stats.moved > 0 && after < before * 0.9, "{before} -> {after}");
+    // Nowhere higher: the whole tree's interior area (the outlier's ancestors included) has not
+    // grown either.
+    let whole_after = interior_area_below(&bvh, f32::INFINITY);
+    assert!(whole_after <= whole_before, "{whole_before} -> {whole_after}");
 }
 
 #[test]

@@ -2,11 +2,10 @@
 //! `cargo test --release --test stream_speed -- --ignored --nocapture`. The bench's shadow rays
 //! (`benches/common`, 131,072 from surface points to random points in the box) through the BVH8
 //! of `BuildParams::default()` on sphereflakes of 3k to 1M triangles and the bunny, three ways:
-//! one `occluded` per ray, `occluded_batch_incoherent` (two walks interleaved) and
-//! `occluded_batch_stream` (64 rays walking together); best of 5 rounds taking turns. Since the
-//! single walk keeps its state in registers, `occluded_batch_incoherent` is that walk ray by
-//! ray (its second column now measures the same walk again: the spread between the two is the
-//! noise); the streams won on small trees on an Intel Xeon and lost on every tree on an AMD EPYC
+//! one `occluded` per ray, `occluded_batch_incoherent` and `occluded_batch_stream` (64 rays
+//! walking together); best of 5 rounds taking turns. `occluded_batch_incoherent` was two walks
+//! interleaved; it is now the single walk ray by ray (its column, "incoherent", measures the same
+//! walk again: the spread between the two is the noise); the streams won on small trees on an Intel Xeon and lost on every tree on an AMD EPYC
 //! (Zen 1), so `wide::occluded_batch` walks scattered rays one at a time.
 
 #[path = "../benches/common/mod.rs"]
@@ -55,7 +54,7 @@ fn by_size() {
         }
         assert!(answers.iter().all(|&a| a == answers[0]), "{name}: {answers:?}");
         println!(
-            "{name:18} {:>8} tris, tree {:>9} bytes: single {:7.2} ms, interleaved {:7.2} ms ({:.2}x), stream {:7.2} ms ({:.2}x)",
+            "{name:18} {:>8} tris, tree {:>9} bytes: single {:7.2} ms, incoherent {:7.2} ms ({:.2}x), stream {:7.2} ms ({:.2}x)",
             tris.len(),
             b8.memory_bytes(),
             best[0],

@@ -2,7 +2,7 @@
 //! answer differently from one walk per ray (written by this session's review): empty slots with
 //! boxes a ray hits, chains deeper than `MAX_WIDE_DEPTH` (one level too deep, or deep below
 //! where one ray leaves the others), nodes with two parents that spend the visit budget. In each,
-//! `occluded_batch_stream`, the adaptive `occluded_batch` and the interleaved batch must answer
+//! `occluded_batch_stream`, the adaptive `occluded_batch` and `occluded_batch_incoherent` must answer
 //! exactly as `occluded` per ray.
 
 use strahl::build::{BuildParams, Bvh2};

@@ -87,7 +87,8 @@ fn check_scene<T: TriangleTest>(name: &str, tris: &[Triangle], n_rays: usize) {
             T::NAME,
             rays.len()
         );
-        // The incoherent batches (two walks interleaved, each refilled as it ends), at every
+        // The incoherent batches (closest hits as two walks interleaved, each refilled as it
+        // ends; any hits one walk at a time), at every
         // short length and the whole set, with an output shorter than the rays (the rest
         // untouched): the single-ray answers (checked against brute force above), bit for bit.
         let want: Vec<bool> = rays.iter().map(|r| occluded_brute_force::<T, _>(tris, r)).collect();

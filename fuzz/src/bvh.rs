@@ -226,7 +226,7 @@ pub fn check_bvh(case: &BvhCase) {
         packet::intersect8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_pure, 0);
         let mut packet_occ = [false; 8];
         packet::occluded8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_occ);
-        // The interleaved batch answers exactly as one call per ray, on every scene (tame or not).
+        // The incoherent batch answers exactly as one call per ray, on every scene (tame or not).
         let mut batch_occ = vec![false; case.rays.len()];
         b8.occluded_batch_incoherent::<Watertight>(&case.rays, &mut batch_occ);
         for (ray, got) in case.rays.iter().zip(&batch_occ) {
@@ -261,7 +261,7 @@ pub fn check_bvh(case: &BvhCase) {
             "{:?}: occluded_batch_reordered",
             params.strategy
         );
-        // The adaptive batches (packets, interleaved walks, ray streams or one ray at a time by
+        // The adaptive batches (packets, interleaved closest-hit walks or one ray at a time by
         // group) and the ray streams alone: one call per ray's any-hit answers exactly; closest
         // hits against brute force below, as the packets' (a packet visits nodes in another
         // order, so of two triangles tied at a hit it may report the other one: found by this

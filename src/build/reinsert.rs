@@ -100,7 +100,6 @@ pub struct ReinsertStats {
     pub max_depth: u32,
 }
 
-/// Working memory of the pass, kept in a [`Builder`](super::Builder).
 /// Nodes one search for a subtree's new place visits at most, in reinsertion
 /// ([`Bvh2::optimize_reinsertion`], [`Refine::Reinsertion`](super::Refine::Reinsertion)); past
 /// it the search takes the best place it has seen (the old place if nothing cheaper).
@@ -124,6 +123,7 @@ pub struct ReinsertStats {
 /// ```
 pub const REINSERT_SEARCH_BUDGET: u32 = 256;
 
+/// Working memory of the pass, kept in a [`Builder`](super::Builder).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct ReinsertScratch {
     parent: Vec<u32>,

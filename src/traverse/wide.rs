@@ -895,10 +895,11 @@ fn occluded_stream<T: TriangleTest, L: Lane, const N: usize>(bvh: BvhWideRef<'_,
 /// rays that entered it, so a node is loaded once for all of them and tested against each with
 /// its single-ray slab test; a leaf's packs are tested with each entering ray's single-ray
 /// kernel; rays retire when blocked. Whether it pays depends on the processor, so
-/// [`occluded_batch`] does not pick it: shadow rays from scattered points through BVH8s of 0.2 to
-/// 2 MB (`tests/stream_speed.rs`) took 1.09-1.16x less time than one call per ray on an Intel
-/// Xeon (2 MB of L2 per core) but 1.19-1.35x *more* on an AMD EPYC of the first Zen generation,
-/// and more on both on trees larger than the cache. Measure it on yours.
+/// [`occluded_batch`] does not pick it: shadow rays from scattered points (`tests/stream_speed.rs`)
+/// ran 1.09-1.16x as fast as one call per ray through BVH8s of 0.2 MB on an Intel Xeon (2 MB of
+/// L2 per core; 0.99-1.02x at 0.8-2 MB), but took 1.19-1.35x as long through BVH8s of 0.2 to
+/// 2 MB on an AMD EPYC of the first Zen generation, and longer on both on trees larger than the
+/// cache. Measure it on yours.
 ///
 /// ```
 /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Moller, wide}};
@@ -940,7 +941,9 @@ pub fn occluded_batch_stream<T: TriangleTest, L: Lane, const N: usize>(
 /// One walk at a time, each [`occluded`]'s. Unlike closest-hit walks
 /// ([`intersect_batch_incoherent`]), any-hit walks are not interleaved: since the single walk
 /// keeps its state in registers, two interleaved walks (state in memory) took longer on every
-/// tree and machine measured.
+/// tree measured on an AMD EPYC (Zen 1) and in the Xeon's bench of one form against the other;
+/// the Xeon's batch through the 70 MB sphereflake measured 0.97x and 1.07x one call per ray in
+/// two runs (within its noise).
 ///
 /// ```
 /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, traverse::{Moller, wide}};
