@@ -38,7 +38,8 @@ pub trait Voxel: Pod + Send + Sync + 'static {
     ///
     /// The default loads one voxel at a time; `u8` and `u16` load each x-adjacent pair as one
     /// wider integer and split the pairs in vector registers; with AVX2, `u8`, `u16` and `f32`
-    /// use gathers (`f32` with AVX-512: of x pairs as 64-bit words). Each corner is an exact conversion,
+    /// use gathers (`f32`: of x pairs as 64-bit words with AVX-512; on AMD processors without
+    /// AVX-512 scalar loads, which were faster there). Each corner is an exact conversion,
     /// so every implementation gives the same bits.
     #[doc(hidden)]
     #[inline(always)]
@@ -186,8 +187,9 @@ mod gather {
     /// bits of each voxel, unchanged).
     // PERF: on an Intel Xeon (AVX-512 machine, AVX2 gathers) the x8 marcher over a dense `f32`
     // volume ran 2.3x its scalar reference with 64 scalar loads per step and 3.4x with the
-    // gathers; an earlier measurement on an AMD EPYC (Zen 3, slow gathers) found no difference.
-    // Also the AVX-512 build's choice on every processor but AMD's ([`pairs_preferred`]).
+    // gathers; an earlier measurement on an AMD EPYC (Zen 3, slow gathers) found no difference,
+    // and on the first Zen generation they were slower ([`f32_corners`]). The choice on every
+    // processor but AMD's.
     #[inline(always)]
     pub(super) fn corners_f32(data: &[f32], base: i32x8, oy: i32, oz: i32) -> [f32x8; 8] {
         let n = data.len();
@@ -210,36 +212,56 @@ mod gather {
         ]
     }
 
-    /// How an AVX-512 build gathers `f32` corners: 1 as 64-bit pairs ([`corners_f32_pairs`]), 2
-    /// one voxel per element ([`corners_f32`]), 0 not yet decided.
-    #[cfg(target_feature = "avx512f")]
+    /// How `f32` corners are read: [`PAIRS`], [`GATHER`] or [`LOADS`]; 0 not yet decided
+    /// ([`f32_corners`] decides once; the tests set each in turn).
     pub(super) static F32_GATHER: core::sync::atomic::AtomicU8 = core::sync::atomic::AtomicU8::new(0);
+    /// `f32` corners gathered as 64-bit x pairs ([`corners_f32_pairs`]; AVX-512 builds only).
+    #[cfg_attr(not(target_feature = "avx512f"), allow(dead_code))]
+    pub(super) const PAIRS: u8 = 1;
+    /// `f32` corners gathered one voxel per element ([`corners_f32`]).
+    pub(super) const GATHER: u8 = 2;
+    /// `f32` corners read by scalar loads (the default of
+    /// [`Voxel::corners_x8`](super::Voxel::corners_x8)).
+    pub(super) const LOADS: u8 = 3;
 
-    /// `true` where `f32` corners are best gathered as 64-bit pairs: on AMD processors.
+    /// How this processor reads `f32` corners best: on AMD processors the 64-bit pair gathers in
+    /// an AVX-512 build and scalar loads in an AVX2 one; elsewhere the 32-bit gathers.
     // PERF: dense f32 Marschner-Lobb 128^3, x8 (`volume_x8_vs_scalar`): on an Intel Xeon
     // (Emerald Rapids, 2026-12-04; best of 5 x 3 rounds, taking turns) the pairs took 22.5 ms and
     // the eight 32-bit gathers 17.0 ms; on an AMD EPYC (Zen 4) the pairs were 13% faster (see
-    // `corners_f32_pairs`). The vendor is read once (cpuid leaf 0), then one relaxed load per call.
-    #[cfg(target_feature = "avx512f")]
+    // `corners_f32_pairs`). On an AMD EPYC of the first Zen generation (AVX2, 2026-12-07; three
+    // rounds of criterion medians, the two builds taking turns) the 32-bit gathers took 39.5-40.6
+    // ms and scalar loads 33.8-34.9 ms (the `u8` and `u16` pair gathers 30.1-34.1 and 30.6-31.0 ms
+    // against 32.9-33.6 and 29.2-31.7 ms with scalar pair loads: kept); an AMD EPYC of the third
+    // generation had measured the gathers and loads alike. The vendor is read once (cpuid leaf
+    // 0), then one relaxed load per call.
     #[inline(always)]
-    pub(super) fn pairs_preferred() -> bool {
+    pub(super) fn f32_corners() -> u8 {
         use core::sync::atomic::Ordering::Relaxed;
         match F32_GATHER.load(Relaxed) {
-            1 => true,
-            2 => false,
-            // An SGX enclave faults on `cpuid`: take the 32-bit gathers there.
-            _ if cfg!(target_env = "sgx") => false,
-            _ => {
-                // SAFETY: every x86_64 processor has `cpuid` (enclaves, which fault on it, are
-                // excluded above), and leaf 0 always exists. (The intrinsic is a safe function on
-                // newer compilers, hence the allow.)
-                #[allow(unused_unsafe)]
-                let id = unsafe { core::arch::x86_64::__cpuid(0) };
-                // "AuthenticAMD" in ebx, edx, ecx.
-                let amd = (id.ebx, id.edx, id.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163);
-                F32_GATHER.store(if amd { 1 } else { 2 }, Relaxed);
-                amd
+            0 => {
+                // An SGX enclave faults on `cpuid`, and miri cannot run it: the 32-bit gathers
+                // there.
+                let c = if cfg!(target_env = "sgx") || cfg!(miri) {
+                    GATHER
+                } else {
+                    // SAFETY: every x86_64 processor has `cpuid` (enclaves, which fault on it,
+                    // are excluded above), and leaf 0 always exists. (The intrinsic is a safe
+                    // function on newer compilers, hence the allow.)
+                    #[allow(unused_unsafe)]
+                    let id = unsafe { core::arch::x86_64::__cpuid(0) };
+                    // "AuthenticAMD" in ebx, edx, ecx.
+                    let amd = (id.ebx, id.edx, id.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163);
+                    match (amd, cfg!(target_feature = "avx512f")) {
+                        (true, true) => PAIRS,
+                        (true, false) => LOADS,
+                        (false, _) => GATHER,
+                    }
+                };
+                F32_GATHER.store(c, Relaxed);
+                c
             }
+            c => c,
         }
     }
 
@@ -306,13 +328,13 @@ impl Voxel for f32 {
 
     #[inline(always)]
     fn corners_x8(data: &[Self], base: i32x8, oy: usize, oz: usize) -> [f32x8; 8] {
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
-        if gather::pairs_preferred() {
-            return gather::corners_f32_pairs(data, base, oy as i32, oz as i32);
-        }
         #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-        return gather::corners_f32(data, base, oy as i32, oz as i32);
-        #[allow(unreachable_code)]
+        match gather::f32_corners() {
+            #[cfg(target_feature = "avx512f")]
+            gather::PAIRS => return gather::corners_f32_pairs(data, base, oy as i32, oz as i32),
+            gather::LOADS => {}
+            _ => return gather::corners_f32(data, base, oy as i32, oz as i32),
+        }
         {
             // The default: one scalar load per lane and corner.
             let base = base.to_array();
@@ -935,8 +957,9 @@ mod tests {
         assert_eq!(one.bounds(), Aabb::new(Vec3::ZERO, Vec3::ZERO));
     }
     /// Every small shape (1, 2, 3 or 5 voxels per axis), every voxel type: the x8 sampler (with
-    /// the AVX2 gathers of `u8`/`u16` pairs where the build has AVX2, both `f32` gathers (of
-    /// 64-bit pairs and of single voxels) where it has AVX-512, and the pair loads elsewhere) equals the scalar reference bit
+    /// the AVX2 gathers of `u8`/`u16` pairs where the build has AVX2, the `f32` gathers of single
+    /// voxels and the scalar loads there too, the 64-bit pair gathers where it has AVX-512, and
+    /// the pair loads elsewhere) equals the scalar reference bit
     /// for bit, including the last cells of the volume, where a gather of 4 or 8 bytes would run
     /// past its end if the offsets were wrong. Every x8 march test also runs the prefetches.
     #[test]
@@ -980,10 +1003,14 @@ mod tests {
         check(|x| x as u8);
         check(|x| x as u16);
         check(|x| (x % 1000) as f32 * 0.37);
-        // Both f32 gathers of an AVX-512 build, whichever this processor gets (other tests
-        // running meanwhile see the same bits either way).
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
-        for choice in [1, 2] {
+        // Every way of reading f32 corners the build has (the pair gathers with AVX-512, the
+        // 32-bit gathers, scalar loads), whichever this processor gets (other tests running
+        // meanwhile see the same bits either way).
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        for choice in [gather::PAIRS, gather::GATHER, gather::LOADS] {
+            if choice == gather::PAIRS && !cfg!(target_feature = "avx512f") {
+                continue;
+            }
             gather::F32_GATHER.store(choice, core::sync::atomic::Ordering::Relaxed);
             check(|x| (x % 1000) as f32 * 0.37);
             check(|x| f32::from_bits(x.wrapping_mul(0x9e37_79b9) & 0x807f_ffff | 0x3f00_0000));
