@@ -15,12 +15,17 @@
 //! adds a member `custom`: `balanced()` (or `hybrid_sah()` with `hybrid`) with those bins, axes
 //! (`all`, `longest`, `allbutsmall`), `bin_sample` and cluster size, for trying points between
 //! the presets.
+//!
+//! `far_outlier` (ignored too): the Morton builders' trees and trace times beside one far
+//! outlier.
 
 use std::time::Instant;
 use strahl::build::{
     BinAxes, BuildParams, Builder, Bvh2, MortonBits, MortonCells, Refine, ReinsertParams, Strategy, TreeletParams,
 };
 use strahl::scene;
+
+mod common;
 
 #[test]
 #[ignore]
@@ -219,6 +224,70 @@ fn speed() {
             bvh.nodes.len(),
             v.max_depth
         );
+    }
+}
+
+/// The Morton builders beside a far outlier (`cargo test --release --test build_speed -- --ignored
+/// --nocapture far_outlier`): for each builder, the build of 100,000 small triangles in the unit
+/// cube without and with one triangle 10^7 away (`common::cube_and_far_outlier`), the SAH cost
+/// of the cube's part of the tree (nodes inside `[0, 2]^3`, over that box's area), and the time
+/// of 100,000 closest-hit rays into the cube through the BVH8 (each ray once, one thread).
+#[test]
+#[ignore]
+fn far_outlier() {
+    use strahl::layout::Bvh8;
+    use strahl::traverse::Watertight;
+    use strahl::{Aabb, Ray, Vec3};
+    let with = common::cube_and_far_outlier(13);
+    let without = &with[..100_000];
+    let mut r = scene::Rng::new(14);
+    let rays: Vec<Ray> = (0..100_000)
+        .map(|_| {
+            let o = Vec3::new(r.f32(), r.f32(), r.f32()) * 3.0 - 1.0;
+            Ray::new(o, Vec3::new(r.f32(), r.f32(), r.f32()) - o)
+        })
+        .collect();
+    let cube = Aabb::new(Vec3::ZERO, Vec3::splat(2.0));
+    let cube_cost = |b: &Bvh2| -> f64 {
+        b.nodes
+            .iter()
+            .filter(|n| n.aabb().max.max_element() <= 2.0)
+            .map(|n| {
+                n.aabb().half_area() as f64 / cube.half_area() as f64 * if n.is_leaf() { n.count as f64 } else { 1.0 }
+            })
+            .sum()
+    };
+    let b63 = |p: BuildParams| BuildParams {
+        morton_bits: MortonBits::Bits63,
+        ..p
+    };
+    for (name, p) in [
+        ("fastest", BuildParams::fastest()),
+        ("lbvh63", b63(BuildParams::fastest())),
+        ("ploc", BuildParams::ploc()),
+        ("ploc63", b63(BuildParams::ploc())),
+        ("hybrid", BuildParams::hybrid()),
+        ("hybrid_sah", BuildParams::hybrid_sah()),
+        ("fast", BuildParams::fast()),
+    ] {
+        for (label, tris) in [("without", without), ("with", &with[..])] {
+            let t0 = Instant::now();
+            let (b2, _) = Bvh2::build(tris, &p).unwrap();
+            let build = t0.elapsed().as_secs_f64();
+            let b8 = Bvh8::from_bvh2(&b2, tris).unwrap();
+            let t0 = Instant::now();
+            let hits = rays
+                .iter()
+                .filter(|ray| b8.intersect::<Watertight>(ray).is_some())
+                .count();
+            let trace = t0.elapsed().as_secs_f64();
+            println!(
+                "{name:11} {label:7} the outlier: build {:7.1} ms, cube's cost {:8.1}, 100k rays {:8.1} ms ({hits} hits)",
+                build * 1e3,
+                cube_cost(&b2),
+                trace * 1e3
+            );
+        }
     }
 }
 

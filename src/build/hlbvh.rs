@@ -63,7 +63,7 @@
 
 use super::binned::Bins;
 use super::builder::{Builder, Counters};
-use super::lbvh::{Code, codes_of, gather, sort_gather30_par, split_point, walk};
+use super::lbvh::{Code, codes_of, gather, order_item_runs, sort_gather30_par, split_point, walk};
 use super::prims::{Box8, CBounds, PrepInfo, PrimRef, ceil_log2};
 use super::radix::{Item, sort_items};
 use super::{BuildParams, Bvh2, MortonBits, Strategy, topdown};
@@ -103,6 +103,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 |x, y, z| morton63_x8(x, y, z, &q),
             );
             sort_items(&mut b.items64, &mut b.tmp64, 63);
+            order_item_runs(&mut b.items64, &b.refs, &mut b.packed);
             let mut codes = core::mem::take(&mut b.items64);
             let c = hierarchy(b, &codes, false, info, p, out, threads);
             core::mem::swap(&mut b.items64, &mut codes);

@@ -5,7 +5,10 @@
 //! 1. Morton codes of the box centroids ([`geometry::morton`](crate::geometry::morton), 30 or 63
 //!    bits, eight at a time), quantised over the centroid bounds.
 //! 2. The order: that of a stable sort by code. Duplicate codes are made unique by appending each
-//!    key's position in that order, as Karras does.
+//!    key's position in that order, as Karras does. A run of 8 or more equal codes (one grid cell)
+//!    is first put in the Morton order of its own centroid bounds ([`order_runs`]; the codes stay),
+//!    so that its balanced splits cut it in space rather than in input order: one far outlier
+//!    otherwise leaves everything else in one cell.
 //! 3. The hierarchy: a range of sorted codes is split where its highest differing bit turns from
 //!    0 to 1; a range of equal codes at the highest bit in which the positions of its ends differ
 //!    (a balanced split). Leaves hold `min_leaf_size` references, or up to `max_leaf_size` whose
@@ -132,6 +135,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 |x, y, z| morton63_x8(x, y, z, &q),
             );
             sort_items(items64, tmp64, 63);
+            order_item_runs(items64, refs, packed);
             hierarchy(refs, alt, items64, p, out)
         }
     }
@@ -497,6 +501,7 @@ fn sort_bucket_gather(
     keys.clear();
     keys.extend(src.iter().enumerate().map(|(j, r)| (r.tag() as u64) << 32 | j as u64));
     sort_bucket(keys, tmp);
+    order_bucket_runs(keys, src, tmp);
     let dst = refs.iter_mut().zip(items.iter_mut()).zip(prim_indices.iter_mut());
     for (((d, it), pi), (j, &k)) in dst.zip(keys.iter().enumerate()) {
         // `k as u32` is a position in the bucket: in range.
@@ -543,6 +548,132 @@ fn each_code30(refs: &[PrimRef], q: &MortonQuantizer, mut f: impl FnMut(usize, u
         let v = r.c2().to_array();
         f(at + j, morton30_scalar(Vec3::new(v[0], v[1], v[2]), q));
     }
+}
+
+/// Runs of at least this many equal codes are put in the Morton order of their own bounds
+/// ([`order_runs`]).
+const RUN_MIN: usize = 8;
+/// Levels of [`order_runs`]: a run's sub-runs of equal sub-codes are re-coded in turn, this many
+/// times in all.
+const RUN_LEVELS: u32 = 3;
+
+/// Puts each run of at least [`RUN_MIN`] equal codes among sorted `items` in the Morton order of
+/// its own centroids: the 30-bit codes of its references' doubled centroids (`c2` of a
+/// position) quantised over the run's bounds ([`MortonQuantizer::new_extended`]), ties by
+/// position; runs of equal sub-codes again, up to [`RUN_LEVELS`] levels. `pos` reads an item's
+/// position and `set` writes one; `same` says whether two items' codes are equal. Only the
+/// positions move, never the codes, so every path's tree keeps its shape (a run is split where
+/// the sorted positions' highest bit differs) and every path gets the same order.
+///
+/// Why: a run is a cell of the grid over all centroids, and without this its references stay in
+/// input order, so the balanced splits of the run cut nothing in space and every box in it spans
+/// the cell. Runs are rare where the centroids spread over the grid, and long where they do not:
+/// one far outlier puts everything else in one cell (100,000 triangles in the unit cube beside
+/// one at 10^7: the tree's cost inside the cube 320x that without the outlier; with this, the
+/// same).
+pub(crate) fn order_runs<T>(
+    items: &mut [T],
+    same: impl Fn(&T, &T) -> bool,
+    pos: impl Fn(&T) -> u32,
+    set: impl Fn(&mut T, u32),
+    c2: impl Fn(u32) -> Vec3,
+    scratch: &mut Vec<u64>,
+) {
+    // The items are sorted, so a run of RUN_MIN or more holds two items 4 apart at a position
+    // that is a multiple of 4 from where the search starts: one test per 4 items, and a branch
+    // taken only at runs of 5 or more.
+    const _: () = assert!(RUN_MIN >= 8);
+    let n = items.len();
+    let mut i = 0;
+    while i + 4 < n {
+        let Some(k) = items[i..]
+            .iter()
+            .step_by(4)
+            .zip(items[i + 4..].iter().step_by(4))
+            .position(|(a, b)| same(a, b))
+        else {
+            break;
+        };
+        i += 4 * k;
+        let (mut b, mut e) = (i, i + 5);
+        while b > 0 && same(&items[b - 1], &items[i]) {
+            b -= 1;
+        }
+        while e < n && same(&items[e], &items[i]) {
+            e += 1;
+        }
+        if e - b >= RUN_MIN {
+            let run = &mut items[b..e];
+            scratch.clear();
+            scratch.extend(run.iter().map(|it| u64::from(pos(it))));
+            recode(scratch, &c2, 1);
+            for (it, &k) in run.iter_mut().zip(scratch.iter()) {
+                set(it, k as u32);
+            }
+        }
+        i = e;
+    }
+}
+
+/// Sorts `keys` (positions in the low halves) by the 30-bit codes of their centroids over their
+/// own bounds, then position; recurses into runs of equal codes up to level [`RUN_LEVELS`].
+fn recode(keys: &mut [u64], c2: &impl Fn(u32) -> Vec3, level: u32) {
+    let mut b = crate::geometry::Aabb::EMPTY;
+    for &k in keys.iter() {
+        b.grow(c2(k as u32));
+    }
+    // All centroids on one point (or a NaN extent): nothing to order by.
+    if b.extent().max_element().partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+        return;
+    }
+    let q = MortonQuantizer::new_extended(&b, crate::geometry::morton::BITS_PER_AXIS_30);
+    for k in keys.iter_mut() {
+        let at = *k as u32;
+        *k = u64::from(morton30_scalar(c2(at), &q)) << 32 | u64::from(at);
+    }
+    keys.sort_unstable();
+    if level >= RUN_LEVELS {
+        return;
+    }
+    let mut s = 0;
+    while let Some(&first) = keys.get(s) {
+        let len = 1 + keys[s + 1..].iter().take_while(|&&k| k >> 32 == first >> 32).count();
+        if len >= RUN_MIN {
+            recode(&mut keys[s..s + len], c2, level + 1);
+        }
+        s += len;
+    }
+}
+
+/// The centroid (doubled) of a reference as a `Vec3`.
+#[inline]
+fn c2_of(r: &PrimRef) -> Vec3 {
+    let v = r.c2().to_array();
+    Vec3::new(v[0], v[1], v[2])
+}
+
+/// [`order_runs`] on sorted `items` whose values are positions in `refs`.
+pub(crate) fn order_item_runs<K: PartialEq>(items: &mut [Item<K>], refs: &[PrimRef], scratch: &mut Vec<u64>) {
+    order_runs(
+        items,
+        |a, b| a.key == b.key,
+        |it| it.val,
+        |it, at| it.val = at,
+        |at| refs.get(at as usize).map_or(Vec3::ZERO, c2_of),
+        scratch,
+    );
+}
+
+/// [`order_runs`] on a bucket's sorted keys `(code << 32) | position in src`.
+fn order_bucket_runs(keys: &mut [u64], src: &[PrimRef], scratch: &mut Vec<u64>) {
+    order_runs(
+        keys,
+        |a, b| a >> 32 == b >> 32,
+        |&k| k as u32,
+        |k, at| *k = *k >> 32 << 32 | u64::from(at),
+        |at| src.get(at as usize).map_or(Vec3::ZERO, c2_of),
+        scratch,
+    );
 }
 
 /// Sorts one bucket of [`sort_gather30`]: `(code << 32) | position` keys whose codes share their
@@ -1115,6 +1246,7 @@ fn sorted_keys(bucket: &[PrimRef], keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
             .map(|(j, r)| u64::from(r.tag()) << 32 | j as u64),
     );
     sort_bucket(keys, tmp);
+    order_bucket_runs(keys, bucket, tmp);
 }
 
 /// [`bucketed30`] on `parts` threads (`std`), the same tree, node for node: the codes, the
@@ -1298,7 +1430,8 @@ mod tests {
     use crate::scene::Rng;
     use alloc::{format, vec};
 
-    /// `sort_gather30` against the plain pipeline: codes, a stable radix sort, a gather.
+    /// `sort_gather30` against the plain pipeline: codes, a stable radix sort, runs of equal codes
+    /// ordered ([`order_item_runs`]), a gather.
     fn check(boxes: &[Aabb]) {
         let mut refs = Vec::new();
         let info = prepare(boxes, &mut refs).unwrap();
@@ -1311,6 +1444,7 @@ mod tests {
             |x, y, z| morton30_x8(x, y, z, &q).to_array(),
         );
         sort_items(&mut want_items, &mut Vec::new(), 30);
+        order_item_runs(&mut want_items, &refs, &mut Vec::new());
         let (mut want_sorted, mut want_out) = (Vec::new(), Bvh2::default());
         gather(&refs, &mut want_sorted, &want_items, &mut want_out);
 
@@ -1352,6 +1486,64 @@ mod tests {
     /// primitive indices, on spread, gridded and clustered boxes and thread counts that leave
     /// ragged last chunks.
     #[cfg(feature = "std")]
+    /// Runs of equal codes after [`order_item_runs`]: a short run keeps its order; a long run
+    /// takes the Morton order of its own bounds, and a cluster within it (one sub-code) that of
+    /// the cluster's bounds; a run on one point keeps its order.
+    #[test]
+    fn runs_take_the_morton_order_of_their_own_bounds() {
+        let mut r = Rng::new(5);
+        let mut pts: Vec<Vec3> = (0..5).map(|_| Vec3::splat(r.f32())).collect();
+        // 30 points in the unit cube, 10 of them in a cluster of 1e-5 at (0.5, 0.5, 0.5).
+        pts.extend((0..20).map(|_| Vec3::new(r.f32(), r.f32(), r.f32())));
+        pts.extend((0..10).map(|_| Vec3::splat(0.5) + Vec3::new(r.f32(), r.f32(), r.f32()) * 1e-5));
+        pts.extend((0..12).map(|_| Vec3::splat(3.0)));
+        let boxes: Vec<Aabb> = pts.iter().map(|&p| Aabb::new(p, p)).collect();
+        let mut refs = Vec::new();
+        prepare(&boxes[..], &mut refs).unwrap();
+        // Codes 1, 2, 3 for the three groups; positions reversed within each.
+        let group = |i: usize| {
+            if i < 5 {
+                1u64
+            } else if i < 35 {
+                2
+            } else {
+                3
+            }
+        };
+        let mut items: Vec<Item<u64>> = (0..pts.len())
+            .map(|i| Item {
+                key: group(i),
+                val: i as u32,
+            })
+            .collect();
+        for g in [0..5, 5..35, 35..47] {
+            items[g].reverse();
+        }
+        order_item_runs(&mut items, &refs, &mut Vec::new());
+        let vals = |g: core::ops::Range<usize>| items[g].iter().map(|it| it.val).collect::<Vec<_>>();
+        // A short run and a run on one point: untouched.
+        assert_eq!(vals(0..5), [4, 3, 2, 1, 0]);
+        assert_eq!(vals(35..47), (35..47).rev().collect::<Vec<u32>>());
+        // The long run: sorted by the codes over its bounds, the cluster's 10 together.
+        let morton = |set: &[u32], at: u32| {
+            let mut b = Aabb::EMPTY;
+            for &i in set {
+                b.grow(pts[i as usize] * 2.0);
+            }
+            let q = MortonQuantizer::new_extended(&b, crate::geometry::morton::BITS_PER_AXIS_30);
+            morton30_scalar(pts[at as usize] * 2.0, &q)
+        };
+        let run = vals(5..35);
+        let level1: Vec<u32> = run.iter().map(|&i| morton(&run, i)).collect();
+        assert!(level1.windows(2).all(|w| w[0] <= w[1]), "{level1:?}");
+        let cluster: Vec<u32> = run.iter().copied().filter(|&i| i >= 25).collect();
+        let at = run.iter().position(|&i| i >= 25).unwrap();
+        assert_eq!(run[at..at + 10], cluster[..], "the cluster is one sub-run");
+        let level2: Vec<u32> = cluster.iter().map(|&i| morton(&cluster, i)).collect();
+        assert!(level2.windows(2).all(|w| w[0] < w[1]), "{level2:?}");
+        assert!(level1[at..at + 10].iter().all(|&c| c == level1[at]));
+    }
+
     #[test]
     fn sort_gather30_par_matches_sequential() {
         let [spread, grid, cluster] = large_scenes(200_003, 12);

@@ -429,15 +429,15 @@ impl BuildParams {
     /// where codes coincide). Measured: two-primitive leaves build about 20% faster than Karras'
     /// single-primitive ones, with an SAH cost within 2% either way.
     ///
-    /// **Not for scenes with far outliers.** Morton codes quantise the box of all centroids: one
-    /// triangle far from the rest (a sky or a distant ground triangle) leaves the rest in a few
-    /// cells, where the tree follows the input order. Measured (AMD EPYC, Zen 1; 100,000
-    /// triangles in a unit cube beside one 10^7 away, 100,000 rays into the cube through the
-    /// BVH8): 43.4 s with `fastest()`, 45.0 s with [`ploc`](Self::ploc), 3.2 s with
-    /// [`hybrid_sah`](Self::hybrid_sah), 0.15 s with [`fast`](Self::fast); without the outlier
-    /// 0.13 s with each. The SAH presets split the outlier off at the root. Not yet handled:
-    /// re-coding runs of equal codes over their own bounds would be the fix.
-    ///
+    /// **Far outliers.** Morton codes quantise the box of all centroids: one triangle far from the
+    /// rest (a sky or a distant ground triangle) leaves the rest in a few grid cells. Runs of
+    /// equal codes are put in the Morton order of their own bounds, so such a tree still cuts the
+    /// cell in space, but the LBVH splits a run at the balanced point of that order rather than
+    /// where the finer codes differ. Measured (AMD EPYC, Zen 1; 100,000 triangles in a unit cube
+    /// beside one 10^7 away, 100,000 rays into the cube through the BVH8; `tests/build_speed.rs`'s
+    /// `far_outlier`): 421 ms with `fastest()` against 229 ms without the outlier (46.7 s before
+    /// runs were ordered); [`ploc`](Self::ploc) and [`hybrid_sah`](Self::hybrid_sah) trace it
+    /// within 4% of their time without the outlier.    ///
     /// ```
     /// use strahl::build::{BuildParams, Bvh2, MortonBits, Strategy};
     /// let p = BuildParams::fastest();

@@ -22,7 +22,7 @@
 //! used); the nodes are laid out bottom-up, children before their parent, the root at index 0.
 
 use super::builder::{Builder, Counters};
-use super::lbvh::{codes_of, gather, sort_gather30_par};
+use super::lbvh::{codes_of, gather, order_item_runs, sort_gather30_par};
 use super::prims::{Box8, PrepInfo, PrimRef};
 use super::radix::sort_items;
 use super::{BuildParams, Bvh2, MortonBits, Node};
@@ -62,6 +62,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 |x, y, z| morton63_x8(x, y, z, &q),
             );
             sort_items(&mut b.items64, &mut b.tmp64, 63);
+            order_item_runs(&mut b.items64, &b.refs, &mut b.packed);
             out.prim_indices.clear();
             gather(&b.refs, &mut b.alt, &b.items64, out);
             true
