@@ -529,12 +529,12 @@ fn cube_cost(bvh: &Bvh2) -> f64 {
 }
 
 /// The Morton builders beside one far outlier: the outlier leaves the cube's 100,000 triangles in
-/// one grid cell, one run of equal codes, which is put in the Morton order of its own bounds.
-/// Without that the run stayed in input order and the cube's part of the tree cost 320x that
-/// built without the outlier (tracing 100,000 rays into the cube took 300x as long). Measured
-/// now: PLOC and the SAH-topped HLBVH build the same cost as without the outlier (1.00x-1.02x);
-/// the LBVH, and the HLBVH whose clusters are LBVH walks, split a run where the sorted positions'
-/// highest bit differs, not where the sub-codes' does: 2.2x-2.6x.
+/// one grid cell, one run of equal codes, which is put in the Morton order of its own bounds and
+/// split by those finer codes. Without that the run stayed in input order and the cube's part of
+/// the tree cost 320x that built without the outlier (tracing 100,000 rays into the cube took
+/// 300x as long); ordered but split at the balanced points of its order, 2.2-2.6x (LBVH, HLBVH).
+/// Measured now: the LBVH 1.04x (16 sub-code bits for 100,001 references under the depth bound
+/// of 64), the others 1.00x.
 #[test]
 fn morton_builders_order_the_cell_beside_a_far_outlier() {
     let with = common::cube_and_far_outlier(13);
@@ -544,21 +544,22 @@ fn morton_builders_order_the_cell_beside_a_far_outlier() {
         ..p
     };
     for (name, p, most) in [
-        ("lbvh30", BuildParams::fastest(), 3.0),
-        ("lbvh63", b63(BuildParams::fastest()), 3.0),
-        ("hlbvh30", BuildParams::hybrid(), 3.0),
-        ("hlbvh63", b63(BuildParams::hybrid()), 3.0),
-        ("hlbvhsah", BuildParams::hybrid_sah(), 1.1),
-        ("ploc30", BuildParams::ploc(), 1.1),
-        ("ploc63", b63(BuildParams::ploc()), 1.1),
+        ("lbvh30", BuildParams::fastest(), 1.1),
+        ("lbvh63", b63(BuildParams::fastest()), 1.1),
+        ("hlbvh30", BuildParams::hybrid(), 1.15),
+        ("hlbvh63", b63(BuildParams::hybrid()), 1.15),
+        ("hlbvhsah", BuildParams::hybrid_sah(), 1.02),
+        ("ploc30", BuildParams::ploc(), 1.02),
+        ("ploc63", b63(BuildParams::ploc()), 1.02),
     ] {
         let (a, _) = Bvh2::build(&with[..], &p).unwrap();
         let (b, _) = Bvh2::build(without, &p).unwrap();
         a.validate(&with[..]).unwrap();
         let ratio = cube_cost(&a) / cube_cost(&b);
+        eprintln!("{name}: the cube's cost {ratio:.3}x that without the outlier");
         assert!(
             ratio <= most,
-            "{name}: the cube's cost {ratio:.2}x that without the outlier"
+            "{name}: the cube's cost {ratio:.3}x that without the outlier"
         );
     }
 }

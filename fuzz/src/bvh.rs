@@ -591,7 +591,7 @@ fn check_tlas(case: &BvhCase, kept: &[Triangle], b8: &Bvh8, scene_tame: bool) {
                 // first; see `TriangleTest::CONSERVATIVE_BOXES`).
                 assert!(
                     got.is_some_and(|g| g.hit.t <= h.hit.t || near_tie(ray, g.hit, h.hit)),
-                    "tlas ray {i}: masked {h:?} before {got:?}"
+                    "tlas ray {i}: masked {h:?} before {got:?} ray {ray:?}"
                 );
             }
             assert_eq!(

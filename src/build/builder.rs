@@ -1,6 +1,6 @@
 //! [`Builder`]: the builders' working memory, kept between builds.
 
-use super::lbvh::WalkStack;
+use super::lbvh::{Runs, WalkStack};
 use super::prims::{self, PrimRef};
 use super::radix::Item;
 use super::treelet::{self, TreeletScratch, TreeletStats};
@@ -71,6 +71,8 @@ pub struct Builder {
     pub(crate) parts: Vec<(u32, u32, u32)>,
     pub(crate) forest: Vec<crate::traverse::Node>,
     pub(crate) walk: WalkStack,
+    /// The Morton builders' ordered runs of equal codes and their sub-codes.
+    pub(crate) runs: Runs,
     /// Treelet restructuring's per-node state.
     pub(crate) treelet: TreeletScratch,
     /// Reinsertion's per-node state.

@@ -74,6 +74,9 @@ use alloc::vec::Vec;
 /// Builds an HLBVH.
 pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2, threads: usize) -> Counters {
     let cb = info.cbounds.to_aabb();
+    // Runs split by their whole sub-codes: the clusters' walks bound their own depth (forced
+    // splits), and the clusters stay the same under any depth bound.
+    b.runs.reset(30);
     match p.morton_bits {
         MortonBits::Bits30 => {
             let q = p.quantizer(&cb);
@@ -86,6 +89,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 &mut b.packed_tmp,
                 &q,
                 out,
+                &mut b.runs,
                 threads,
             );
             core::mem::swap(&mut b.refs, &mut b.alt);
@@ -103,7 +107,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 |x, y, z| morton63_x8(x, y, z, &q),
             );
             sort_items(&mut b.items64, &mut b.tmp64, 63);
-            order_item_runs(&mut b.items64, &b.refs, &mut b.packed);
+            order_item_runs(&mut b.items64, &b.refs, &mut b.packed, &mut b.runs);
             let mut codes = core::mem::take(&mut b.items64);
             let c = hierarchy(b, &codes, false, info, p, out, threads);
             core::mem::swap(&mut b.items64, &mut codes);
@@ -143,7 +147,7 @@ fn hierarchy<K: Code>(
             clusters.push([lo, hi]);
             continue;
         }
-        let mid = split_point(codes, lo, hi);
+        let mid = split_point(codes, &b.runs, lo, hi);
         // NOTE: defensive; sorted codes always split strictly inside.
         let mid = if lo < mid && mid < hi { mid } else { lo + (hi - lo) / 2 };
         // Right first, so clusters come out in Morton order.
@@ -257,7 +261,7 @@ fn hierarchy<K: Code>(
         }
         let k = top.prim_indices.get(node.index as usize).copied().unwrap_or(0);
         let [lo, hi] = clusters[k as usize];
-        walk(nodes, &b.alt, codes, p, [i, lo, hi, depth], stack, &mut c);
+        walk(nodes, &b.alt, codes, &b.runs, p, [i, lo, hi, depth], stack, &mut c);
     }
     c
 }

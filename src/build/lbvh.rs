@@ -6,13 +6,15 @@
 //!    bits, eight at a time), quantised over the centroid bounds.
 //! 2. The order: that of a stable sort by code. Duplicate codes are made unique by appending each
 //!    key's position in that order, as Karras does. A run of 8 or more equal codes (one grid cell)
-//!    is first put in the Morton order of its own centroid bounds ([`order_runs`]; the codes stay),
-//!    so that its balanced splits cut it in space rather than in input order: one far outlier
-//!    otherwise leaves everything else in one cell.
+//!    is first put in the Morton order of its own centroid bounds ([`order_runs`]; the codes
+//!    stay), its *sub-codes*: one far outlier otherwise leaves everything else in one cell, in
+//!    input order.
 //! 3. The hierarchy: a range of sorted codes is split where its highest differing bit turns from
-//!    0 to 1; a range of equal codes at the highest bit in which the positions of its ends differ
-//!    (a balanced split). Leaves hold `min_leaf_size` references, or up to `max_leaf_size` whose
-//!    codes are all equal.
+//!    0 to 1; a range of equal codes in an ordered run the same way by the top bits of its
+//!    sub-codes ([`Runs`], as if appended to the codes; as many bits as the depth bound allows,
+//!    [`sub_bits`]); a range where those are equal too at the highest bit in which the positions
+//!    of its ends differ (a balanced split). Leaves hold `min_leaf_size` references, or up to
+//!    `max_leaf_size` whose codes (and kept sub-code bits) are all equal.
 //! 4. Boxes: a leaf's is the union of its references', an interior node's that of its
 //!    children's.
 //!
@@ -106,8 +108,10 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
         packed,
         packed_tmp,
         codes,
+        runs,
         ..
     } = b;
+    runs.reset(sub_bits(refs.len(), p));
     match p.morton_bits {
         MortonBits::Bits30 if bottom_up_ok(refs.len(), p) => {
             let q = p.quantizer(&cb);
@@ -123,8 +127,8 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
         }
         MortonBits::Bits30 => {
             let q = p.quantizer(&cb);
-            sort_gather30(refs, alt, items32, packed, packed_tmp, &q, out);
-            walk_sorted(refs, items32, p, out)
+            sort_gather30(refs, alt, items32, packed, packed_tmp, &q, out, runs);
+            walk_sorted(refs, items32, runs, p, out)
         }
         MortonBits::Bits63 => {
             let q = p.quantizer(&cb);
@@ -135,8 +139,8 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 |x, y, z| morton63_x8(x, y, z, &q),
             );
             sort_items(items64, tmp64, 63);
-            order_item_runs(items64, refs, packed);
-            hierarchy(refs, alt, items64, p, out)
+            order_item_runs(items64, refs, packed, runs);
+            hierarchy(refs, alt, items64, runs, p, out)
         }
     }
 }
@@ -208,6 +212,7 @@ fn hierarchy<K: Code>(
     refs: &[PrimRef],
     sorted: &mut Vec<PrimRef>,
     codes: &[Item<K>],
+    runs: &Runs,
     p: &BuildParams,
     out: &mut Bvh2,
 ) -> Counters {
@@ -223,6 +228,7 @@ fn hierarchy<K: Code>(
         &mut out.nodes,
         sorted,
         codes,
+        runs,
         p,
         [0, 0, n as u32, 1],
         &mut stack,
@@ -251,12 +257,14 @@ const TOP_BITS: u32 = 6;
 /// 3. Each bucket (about 16,000 references of a 1M-triangle even scene, in the L2 cache) is sorted by
 ///    `(code, position)` and gathered back into `refs`, lane 7 cleared.
 ///
-/// The order is that of a stable sort by code. On return `items` holds the sorted codes (values:
-/// their positions), `refs` the references in that order and `out.prim_indices` their primitive
-/// indices; `alt` and `packed` hold garbage.
+/// The order is that of a stable sort by code, with runs of equal codes then ordered by
+/// [`order_runs`]. On return `items` holds the sorted codes (values: their positions), `refs` the
+/// references in that order, `out.prim_indices` their primitive indices and `runs` (reset by the
+/// caller to its sub-code bits) the ordered runs; `alt` and `packed` hold garbage.
 // PERF: measured on the 1M soup against codes, a full LSD radix sort of (code, position) and a
 // gather of the references in sorted order (random 32-byte reads, TLB and latency bound): about
 // half the time (phase timings under load: 80 to 40 ms; see the module docs).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn sort_gather30(
     refs: &mut [PrimRef],
     alt: &mut Vec<PrimRef>,
@@ -265,6 +273,7 @@ pub(crate) fn sort_gather30(
     packed_tmp: &mut Vec<u64>,
     q: &MortonQuantizer,
     out: &mut Bvh2,
+    runs: &mut Runs,
 ) {
     const BUCKETS: usize = 1 << TOP_BITS;
     const SHIFT: u32 = 30 - TOP_BITS;
@@ -314,12 +323,13 @@ pub(crate) fn sort_gather30(
             &mut out.prim_indices[a..b],
             packed,
             packed_tmp,
+            runs,
         );
     }
 }
 
-/// [`sort_gather30`] on up to `threads` threads (`std`): the same order, codes, references and
-/// primitive indices. The references in equal chunks, one per thread: each computes its chunk's
+/// [`sort_gather30`] on up to `threads` threads (`std`): the same order, codes, references,
+/// primitive indices and runs. The references in equal chunks, one per thread: each computes its chunk's
 /// codes and top-digit histogram; the chunks then scatter side by side, each into its own run of
 /// every bucket (runs in chunk order: the order of the stable sequential scatter); then the
 /// buckets are sorted and gathered side by side. Inputs below 65,536 references per thread (and
@@ -333,16 +343,17 @@ pub(crate) fn sort_gather30_par(
     packed_tmp: &mut Vec<u64>,
     q: &MortonQuantizer,
     out: &mut Bvh2,
+    runs: &mut Runs,
     threads: usize,
 ) {
     let parts = threads.min(refs.len() / 65_536);
     #[cfg(feature = "std")]
     if parts >= 2 {
-        sort_gather30_chunks(refs, alt, items, q, out, parts);
+        sort_gather30_chunks(refs, alt, items, q, out, runs, parts);
         return;
     }
     let _ = parts;
-    sort_gather30(refs, alt, items, packed, packed_tmp, q, out);
+    sort_gather30(refs, alt, items, packed, packed_tmp, q, out, runs);
 }
 
 /// [`sort_gather30_par`] in `parts` chunks.
@@ -353,6 +364,7 @@ fn sort_gather30_chunks(
     items: &mut Vec<Item<u32>>,
     q: &MortonQuantizer,
     out: &mut Bvh2,
+    runs: &mut Runs,
     parts: usize,
 ) {
     use core::sync::atomic::{AtomicUsize, Ordering};
@@ -362,30 +374,46 @@ fn sort_gather30_chunks(
     let start = scatter30_chunks(refs, alt, items, q, parts);
     out.prim_indices.resize(n, 0);
     // 3. Each bucket sorted and gathered back, side by side.
+    // Each bucket's runs, joined in order at the end.
+    let mut bucket_runs: Vec<Runs> = (0..BUCKETS)
+        .map(|_| Runs {
+            bits: runs.bits,
+            ..Runs::default()
+        })
+        .collect();
     {
-        type BucketJob<'a> = (usize, &'a mut [PrimRef], &'a mut [Item<u32>], &'a mut [u32]);
+        type BucketJob<'a> = (
+            usize,
+            &'a mut [PrimRef],
+            &'a mut [Item<u32>],
+            &'a mut [u32],
+            &'a mut Runs,
+        );
         let (mut r, mut it, mut pi) = (&mut refs[..], &mut items[..n], &mut out.prim_indices[..n]);
         let mut jobs: Vec<Mutex<Option<BucketJob<'_>>>> = Vec::with_capacity(BUCKETS);
-        for w in start.windows(2) {
+        for (w, br) in start.windows(2).zip(bucket_runs.iter_mut()) {
             // NOTE: the lengths before `take` empties the slices.
             let len = ((w[1] - w[0]) as usize).min(r.len()).min(it.len()).min(pi.len());
             let (a, ra) = core::mem::take(&mut r).split_at_mut(len);
             let (b, rb) = core::mem::take(&mut it).split_at_mut(len);
             let (c, rc) = core::mem::take(&mut pi).split_at_mut(len);
             (r, it, pi) = (ra, rb, rc);
-            jobs.push(Mutex::new(Some((w[0] as usize, a, b, c))));
+            jobs.push(Mutex::new(Some((w[0] as usize, a, b, c, br))));
         }
         let alt = &alt[..n];
         let next = AtomicUsize::new(0);
         crate::par::each(0..parts, |_| {
             let (mut keys, mut tmp) = (Vec::new(), Vec::new());
             while let Some(job) = jobs.get(next.fetch_add(1, Ordering::Relaxed)) {
-                let Some((a, dr, di, dp)) = job.lock().ok().and_then(|mut g| g.take()) else {
+                let Some((a, dr, di, dp, br)) = job.lock().ok().and_then(|mut g| g.take()) else {
                     continue;
                 };
-                sort_bucket_gather(a, &alt[a..a + dr.len()], dr, di, dp, &mut keys, &mut tmp);
+                sort_bucket_gather(a, &alt[a..a + dr.len()], dr, di, dp, &mut keys, &mut tmp, br);
             }
         });
+    }
+    for br in &bucket_runs {
+        runs.append(br);
     }
 }
 
@@ -488,7 +516,8 @@ fn scatter30_chunks(
 /// Sorts one bucket of [`sort_gather30`] (its references `src`, tagged with their codes, from
 /// slot `a` on) by `(code, position)` and gathers it into `refs` (tags cleared), `items` (codes,
 /// and their slots as values) and `prim_indices`, all as long as `src`. `keys` and `tmp` are
-/// scratch.
+/// scratch. Runs of equal codes are ordered ([`order_runs`]) and recorded in `runs`.
+#[allow(clippy::too_many_arguments)]
 fn sort_bucket_gather(
     a: usize,
     src: &[PrimRef],
@@ -497,11 +526,12 @@ fn sort_bucket_gather(
     prim_indices: &mut [u32],
     keys: &mut Vec<u64>,
     tmp: &mut Vec<u64>,
+    runs: &mut Runs,
 ) {
     keys.clear();
     keys.extend(src.iter().enumerate().map(|(j, r)| (r.tag() as u64) << 32 | j as u64));
     sort_bucket(keys, tmp);
-    order_bucket_runs(keys, src, tmp);
+    order_bucket_runs(keys, src, tmp, |b, k| runs.push(a + b, k));
     let dst = refs.iter_mut().zip(items.iter_mut()).zip(prim_indices.iter_mut());
     for (((d, it), pi), (j, &k)) in dst.zip(keys.iter().enumerate()) {
         // `k as u32` is a position in the bucket: in range.
@@ -561,16 +591,18 @@ const RUN_LEVELS: u32 = 3;
 /// its own centroids: the 30-bit codes of its references' doubled centroids (`c2` of a
 /// position) quantised over the run's bounds ([`MortonQuantizer::new_extended`]), ties by
 /// position; runs of equal sub-codes again, up to [`RUN_LEVELS`] levels. `pos` reads an item's
-/// position and `set` writes one; `same` says whether two items' codes are equal. Only the
-/// positions move, never the codes, so every path's tree keeps its shape (a run is split where
-/// the sorted positions' highest bit differs) and every path gets the same order.
+/// position and `set` writes one; `same` says whether two items' codes are equal; `emit` gets
+/// each ordered run's first index and its keys, `(level-1 sub-code << 32) | position`, in the new
+/// order (for [`Runs`]). Only the positions move, never the codes, so every path gets the same
+/// order, and the hierarchy splits a run by its sub-codes' high bits ([`Runs`]), then where the
+/// sorted positions' highest bit differs.
 ///
 /// Why: a run is a cell of the grid over all centroids, and without this its references stay in
 /// input order, so the balanced splits of the run cut nothing in space and every box in it spans
 /// the cell. Runs are rare where the centroids spread over the grid, and long where they do not:
 /// one far outlier puts everything else in one cell (100,000 triangles in the unit cube beside
-/// one at 10^7: the tree's cost inside the cube 320x that without the outlier; with this, the
-/// same).
+/// one at 10^7: the LBVH's cost inside the cube 320x that without the outlier; ordered, 2.6x;
+/// split by the sub-codes too, 1.04x).
 pub(crate) fn order_runs<T>(
     items: &mut [T],
     same: impl Fn(&T, &T) -> bool,
@@ -578,6 +610,7 @@ pub(crate) fn order_runs<T>(
     set: impl Fn(&mut T, u32),
     c2: impl Fn(u32) -> Vec3,
     scratch: &mut Vec<u64>,
+    mut emit: impl FnMut(usize, &[u64]),
 ) {
     // The items are sorted, so a run of RUN_MIN or more holds two items 4 apart at a position
     // that is a multiple of 4 from where the search starts: one test per 4 items, and a branch
@@ -610,13 +643,15 @@ pub(crate) fn order_runs<T>(
             for (it, &k) in run.iter_mut().zip(scratch.iter()) {
                 set(it, k as u32);
             }
+            emit(b, scratch);
         }
         i = e;
     }
 }
 
 /// Sorts `keys` (positions in the low halves) by the 30-bit codes of their centroids over their
-/// own bounds, then position; recurses into runs of equal codes up to level [`RUN_LEVELS`].
+/// own bounds, then position; recurses into runs of equal codes up to level [`RUN_LEVELS`]. On
+/// return the high halves hold this level's codes (0 where the centroids are all one point).
 fn recode(keys: &mut [u64], c2: &impl Fn(u32) -> Vec3, level: u32) {
     let mut b = crate::geometry::Aabb::EMPTY;
     for &k in keys.iter() {
@@ -639,7 +674,12 @@ fn recode(keys: &mut [u64], c2: &impl Fn(u32) -> Vec3, level: u32) {
     while let Some(&first) = keys.get(s) {
         let len = 1 + keys[s + 1..].iter().take_while(|&&k| k >> 32 == first >> 32).count();
         if len >= RUN_MIN {
-            recode(&mut keys[s..s + len], c2, level + 1);
+            let sub = &mut keys[s..s + len];
+            recode(sub, c2, level + 1);
+            // This level's code back in the high halves.
+            for k in sub.iter_mut() {
+                *k = first >> 32 << 32 | *k & 0xffff_ffff;
+            }
         }
         s += len;
     }
@@ -652,8 +692,13 @@ fn c2_of(r: &PrimRef) -> Vec3 {
     Vec3::new(v[0], v[1], v[2])
 }
 
-/// [`order_runs`] on sorted `items` whose values are positions in `refs`.
-pub(crate) fn order_item_runs<K: PartialEq>(items: &mut [Item<K>], refs: &[PrimRef], scratch: &mut Vec<u64>) {
+/// [`order_runs`] on sorted `items` whose values are positions in `refs`; the runs into `runs`.
+pub(crate) fn order_item_runs<K: PartialEq>(
+    items: &mut [Item<K>],
+    refs: &[PrimRef],
+    scratch: &mut Vec<u64>,
+    runs: &mut Runs,
+) {
     order_runs(
         items,
         |a, b| a.key == b.key,
@@ -661,11 +706,12 @@ pub(crate) fn order_item_runs<K: PartialEq>(items: &mut [Item<K>], refs: &[PrimR
         |it, at| it.val = at,
         |at| refs.get(at as usize).map_or(Vec3::ZERO, c2_of),
         scratch,
+        |b, keys| runs.push(b, keys),
     );
 }
 
-/// [`order_runs`] on a bucket's sorted keys `(code << 32) | position in src`.
-fn order_bucket_runs(keys: &mut [u64], src: &[PrimRef], scratch: &mut Vec<u64>) {
+/// [`order_runs`] on a bucket's sorted keys `(code << 32) | position in src`; `emit` as there.
+fn order_bucket_runs(keys: &mut [u64], src: &[PrimRef], scratch: &mut Vec<u64>, emit: impl FnMut(usize, &[u64])) {
     order_runs(
         keys,
         |a, b| a >> 32 == b >> 32,
@@ -673,7 +719,82 @@ fn order_bucket_runs(keys: &mut [u64], src: &[PrimRef], scratch: &mut Vec<u64>) 
         |k, at| *k = *k >> 32 << 32 | u64::from(at),
         |at| src.get(at as usize).map_or(Vec3::ZERO, c2_of),
         scratch,
+        emit,
     );
+}
+
+/// The runs [`order_runs`] ordered, by sorted position, with the top [`bits`](Self::reset)
+/// bits of their level-1 sub-codes: within a run of equal codes the hierarchy splits where
+/// those differ (as if they were appended to the code), then where the positions do. Empty
+/// where there are no runs or no bits.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Runs {
+    /// Each run: its first sorted position, its end, and where its sub-codes start in `subs`.
+    spans: Vec<[u32; 3]>,
+    /// The runs' sub-codes (cut to `bits`), run after run.
+    subs: Vec<u32>,
+    bits: u32,
+}
+
+impl Runs {
+    /// Empties it for sub-codes of `bits` bits (at most 30; 0: none kept, no splits by them).
+    pub(crate) fn reset(&mut self, bits: u32) {
+        self.spans.clear();
+        self.subs.clear();
+        self.bits = bits.min(30);
+    }
+
+    /// Records the run at sorted positions `begin..` with keys `keys` (see [`order_runs`]),
+    /// unless its sub-codes' kept bits are all equal (nothing to split by).
+    fn push(&mut self, begin: usize, keys: &[u64]) {
+        let shift = 30 - self.bits;
+        let sub = |k: u64| (k >> 32) as u32 >> shift;
+        if self.bits == 0 || keys.first().map(|&k| sub(k)) == keys.last().map(|&k| sub(k)) {
+            return;
+        }
+        self.spans
+            .push([begin as u32, (begin + keys.len()) as u32, self.subs.len() as u32]);
+        self.subs.extend(keys.iter().map(|&k| sub(k)));
+    }
+
+    /// Appends `other`'s runs (at later positions).
+    #[cfg(feature = "std")]
+    fn append(&mut self, other: &Runs) {
+        let at = self.subs.len() as u32;
+        self.spans.extend(other.spans.iter().map(|&[b, e, o]| [b, e, o + at]));
+        self.subs.extend_from_slice(&other.subs);
+    }
+
+    /// The sub-codes of sorted positions `b..e` where they lie in one recorded run.
+    #[inline]
+    pub(crate) fn subs_of(&self, b: u32, e: u32) -> Option<&[u32]> {
+        if self.spans.is_empty() {
+            return None;
+        }
+        let [sb, se, at] = *self
+            .spans
+            .get(self.spans.partition_point(|s| s[0] <= b).checked_sub(1)?)?;
+        if e > se {
+            return None;
+        }
+        self.subs.get((at + b - sb) as usize..(at + e - sb) as usize)
+    }
+
+    /// Whether sorted positions `b..e`, whose codes are equal, have equal sub-codes too.
+    #[inline]
+    fn same_subs(&self, b: u32, e: u32) -> bool {
+        self.subs_of(b, e).is_none_or(|s| s.first() == s.last())
+    }
+}
+
+/// Sub-code bits the LBVH splits runs by ([`Runs`]) for `n` references: what the depth bound
+/// leaves beside 30 code bits and the positions' bits (see [`bottom_up_ok`]), at most 30; 13 for
+/// a million references under the default bound of 64. (HLBVH keeps all 30: its clusters' walks
+/// force splits where the bound needs them.)
+pub(crate) fn sub_bits(n: usize, p: &BuildParams) -> u32 {
+    p.max_depth
+        .saturating_sub(31 + super::prims::ceil_log2(n.min(u32::MAX as usize) as u32))
+        .min(30)
 }
 
 /// Sorts one bucket of [`sort_gather30`]: `(code << 32) | position` keys whose codes share their
@@ -732,7 +853,13 @@ fn sort_bucket(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
 
 /// The LBVH over `sorted` references whose codes are `codes` (as [`hierarchy`] after its
 /// gather; `out.prim_indices` already holds the primitive indices).
-fn walk_sorted<K: Code>(sorted: &[PrimRef], codes: &[Item<K>], p: &BuildParams, out: &mut Bvh2) -> Counters {
+fn walk_sorted<K: Code>(
+    sorted: &[PrimRef],
+    codes: &[Item<K>],
+    runs: &Runs,
+    p: &BuildParams,
+    out: &mut Bvh2,
+) -> Counters {
     let n = sorted.len();
     let mut c = Counters::default();
     out.nodes.reserve((2 * n).saturating_sub(1));
@@ -743,6 +870,7 @@ fn walk_sorted<K: Code>(sorted: &[PrimRef], codes: &[Item<K>], p: &BuildParams, 
         &mut out.nodes,
         sorted,
         codes,
+        runs,
         p,
         [0, 0, n as u32, 1],
         &mut stack,
@@ -760,16 +888,24 @@ pub(crate) fn gather<K>(refs: &[PrimRef], sorted: &mut Vec<PrimRef>, codes: &[It
 }
 
 /// Where the LBVH splits sorted range `b..e` (`e - b >= 2`): the first code with the highest
-/// differing bit of the range set, or, where all codes are equal, at the highest bit in which
-/// the ends' positions differ. Always strictly inside the range for sorted codes.
+/// differing bit of the range set, or, where all codes are equal, the same by the sub-codes of
+/// an ordered run ([`Runs`]), or, where those are equal too, at the highest bit in which the
+/// ends' positions differ. Always strictly inside the range for sorted codes.
 #[inline]
-pub(crate) fn split_point<K: Code>(codes: &[Item<K>], b: u32, e: u32) -> u32 {
+pub(crate) fn split_point<K: Code>(codes: &[Item<K>], runs: &Runs, b: u32, e: u32) -> u32 {
     let (first, last) = (codes[b as usize].key, codes[e as usize - 1].key);
     match K::high_bit_of_xor(first, last) {
         // The first code in the range with that bit set (the range shares every higher bit).
         Some(bit) => b + codes[b as usize..e as usize].partition_point(|c| !c.key.bit_set(bit)) as u32,
-        // All codes equal: split the appended positions at their highest differing bit.
         None => {
+            // Sub-codes, sorted within the run: the same rule.
+            if let Some(subs) = runs.subs_of(b, e)
+                && let (Some(&f), Some(&l)) = (subs.first(), subs.last())
+                && let Some(bit) = u32::high_bit_of_xor(f, l)
+            {
+                return b + subs.partition_point(|&x| !x.bit_set(bit)) as u32;
+            }
+            // All equal: split the appended positions at their highest differing bit.
             let bit = 31 - (b ^ (e - 1)).leading_zeros();
             (e - 1) >> bit << bit
         }
@@ -777,12 +913,14 @@ pub(crate) fn split_point<K: Code>(codes: &[Item<K>], b: u32, e: u32) -> u32 {
 }
 
 /// The hierarchy over sorted range `begin..end` into the existing node `root` at `depth`
-/// (`task = [root, begin, end, depth]`), appending nodes; `sorted` holds the gathered references.
-/// `stack` is scratch (left empty).
+/// (`task = [root, begin, end, depth]`), appending nodes; `sorted` holds the gathered references,
+/// `runs` the ordered runs of equal codes. `stack` is scratch (left empty).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn walk<K: Code>(
     nodes: &mut Vec<Node>,
     sorted: &[PrimRef],
     codes: &[Item<K>],
+    runs: &Runs,
     p: &BuildParams,
     task: [u32; 4],
     ws: &mut WalkStack,
@@ -842,7 +980,7 @@ pub(crate) fn walk<K: Code>(
         }
         let count = e - b;
         let (first, last) = (codes[b as usize].key, codes[e as usize - 1].key);
-        if count <= p.min_leaf_size || (count <= p.max_leaf_size && first == last) {
+        if count <= p.min_leaf_size || (count <= p.max_leaf_size && first == last && runs.same_subs(b, e)) {
             let bx = sorted[b as usize..e as usize]
                 .iter()
                 .fold(Box8::EMPTY, |acc, r| acc.union(r.bounds()));
@@ -853,7 +991,7 @@ pub(crate) fn walk<K: Code>(
             }
             continue;
         }
-        let mut mid = split_point(codes, b, e);
+        let mut mid = split_point(codes, runs, b, e);
         debug_assert!(b < mid && mid < e);
         if !(b < mid && mid < e && depth_ok(depth, mid - b, e - mid, p.max_depth)) {
             c.forced_splits += 1;
@@ -884,8 +1022,9 @@ pub(crate) fn walk<K: Code>(
 
 /// `true` if [`BottomUp`] builds exactly the tree of [`walk`] for `n` references: the depth
 /// bound can never force a split. On the path to any node the splits consume distinct code bits
-/// (at most 30) and then distinct bits of the positions (at most `ceil(log2 n)`), so a child of
-/// `m` references at depth `d + 1` has `d + 1 + ceil(log2 m) <= 31 + ceil(log2 n)`.
+/// (at most 30), then distinct kept sub-code bits (at most [`sub_bits`], chosen to fit) and then
+/// distinct bits of the positions (at most `ceil(log2 n)`), so a child of `m` references at
+/// depth `d + 1` has `d + 1 + ceil(log2 m) <= 31 + sub_bits + ceil(log2 n) <= max_depth`.
 #[inline]
 pub(crate) fn bottom_up_ok(n: usize, p: &BuildParams) -> bool {
     n <= super::MAX_PRIMITIVES && 31 + super::prims::ceil_log2(n as u32) <= p.max_depth
@@ -898,9 +1037,9 @@ struct Pending {
     /// Its range of sorted positions.
     begin: u32,
     end: u32,
-    /// The codes at `begin` and `end - 1`.
-    first: u32,
-    last: u32,
+    /// The keys (code and sub-code, [`BottomUp::feed`]) at `begin` and `end - 1`.
+    first: u64,
+    last: u64,
     /// Its left child's index (the right one follows), or [`LEAF`] while the subtree may still
     /// become (part of) one leaf.
     pair: u32,
@@ -927,9 +1066,10 @@ impl Pending {
 /// [`finish`](Self::finish)), the same tree as [`walk`] where [`bottom_up_ok`] holds (tested),
 /// laid out in post-order.
 ///
-/// With the position appended to every code (Karras 2012), the split of a range is the one
-/// boundary `i | i + 1` inside it of largest "separator": the highest differing bit of the two
-/// codes, above every bit of the positions where the codes are equal. So the hierarchy is the
+/// With the sub-code ([`Runs`]) and the position appended to every code (Karras 2012), the split
+/// of a range is the one boundary `i | i + 1` inside it of largest "separator": the highest
+/// differing bit of the two keys (code and sub-code), above every bit of the positions where the
+/// keys are equal. So the hierarchy is the
 /// Cartesian tree of the separators (largest at the root), which a stack builds in one pass, as
 /// Apetrei ("Fast and Simple Agglomerative LBVH Construction", 2014) builds it bottom-up: a
 /// subtree on the stack joins the one to its right while its separator is smaller than the
@@ -940,13 +1080,16 @@ impl Pending {
 /// (the root, at index 0, excepted). No binary searches, and the references are read once.
 struct BottomUp {
     /// Subtrees with the separator to their right, `len` of them; separators decrease from
-    /// bottom to top, and there are 62 values (`0 ..= 61`), so at most 62 entries.
-    subs: [Pending; 64],
-    seps: [u32; 64],
+    /// bottom to top, and there are at most 92 values (`0 ..= 91`, see [`separator`]), so at
+    /// most 92 entries.
+    subs: [Pending; 128],
+    seps: [u32; 128],
     len: usize,
-    /// The last reference fed and its code (its separator needs the next code).
+    /// The last reference fed and its key (its separator needs the next key).
     prev: PrimRef,
-    prev_code: u32,
+    prev_code: u64,
+    /// Sub-code bits below the code in a key ([`Runs`]).
+    bits: u32,
     /// The sorted position of the next reference.
     at: u32,
     /// References fed so far.
@@ -960,7 +1103,7 @@ impl BottomUp {
     /// A construction over sorted positions `at..` (a bucket of the parallel build starts past
     /// 0). Nodes go to the array the calls pass, each interior node's children at the array's
     /// index where they were appended.
-    fn new(p: &BuildParams, at: u32) -> Self {
+    fn new(p: &BuildParams, at: u32, bits: u32) -> Self {
         Self {
             subs: [Pending {
                 bx: Box8::EMPTY,
@@ -970,11 +1113,12 @@ impl BottomUp {
                 last: 0,
                 pair: LEAF,
                 height: 0,
-            }; 64],
-            seps: [0; 64],
+            }; 128],
+            seps: [0; 128],
             len: 0,
             prev: PrimRef(f32x8::ZERO),
             prev_code: 0,
+            bits,
             at,
             fed: 0,
             min_leaf: p.min_leaf_size,
@@ -1019,20 +1163,22 @@ impl BottomUp {
     /// subtrees on top whose separators are smaller.
     #[inline(always)]
     fn push(&mut self, mut cur: Pending, sep: u32, nodes: &mut impl NodeSink) {
-        // `& 63`: a no-op on lengths up to 62 (see `subs`) that drops the bounds checks.
-        while self.len > 0 && self.seps[(self.len - 1) & 63] < sep {
+        // `& 127`: a no-op on lengths up to 92 (see `subs`) that drops the bounds checks.
+        while self.len > 0 && self.seps[(self.len - 1) & 127] < sep {
             self.len -= 1;
-            let l = self.subs[self.len & 63];
+            let l = self.subs[self.len & 127];
             cur = self.join(l, cur, nodes);
         }
-        self.subs[self.len & 63] = cur;
-        self.seps[self.len & 63] = sep;
+        self.subs[self.len & 127] = cur;
+        self.seps[self.len & 127] = sep;
         self.len += 1;
     }
 
-    /// The next reference in Morton order (ties in input order) and its code.
+    /// The next reference in Morton order (as [`order_runs`] leaves it), its code and its
+    /// sub-code (0 outside ordered runs, at most `bits` bits; [`Runs`]).
     #[inline(always)]
-    fn feed(&mut self, code: u32, r: PrimRef, nodes: &mut Vec<Node>) {
+    fn feed(&mut self, code: u32, sub: u32, r: PrimRef, nodes: &mut Vec<Node>) {
+        let code = self.key(code, sub);
         let (pcode, pr) = (self.prev_code, self.prev);
         self.prev_code = code;
         self.prev = r;
@@ -1047,8 +1193,15 @@ impl BottomUp {
         self.push(Self::leaf(&pr, i, pcode), separator(pcode, code, i), nodes);
     }
 
+    /// The key of a code and its sub-code (0 outside ordered runs, at most `bits` bits): the
+    /// sub-code appended below the code.
     #[inline(always)]
-    fn leaf(r: &PrimRef, i: u32, code: u32) -> Pending {
+    fn key(&self, code: u32, sub: u32) -> u64 {
+        u64::from(code) << self.bits | u64::from(sub)
+    }
+
+    #[inline(always)]
+    fn leaf(r: &PrimRef, i: u32, code: u64) -> Pending {
         Pending {
             bx: r.bounds(),
             begin: i,
@@ -1135,14 +1288,15 @@ impl NodeSink for Placed {
     }
 }
 
-/// The separator between sorted positions `i` and `i + 1` with codes `a` and `b`: 32 + the
-/// highest differing code bit, or, where the codes are equal, the highest differing bit of the
-/// positions (see [`BottomUp`]).
+/// The separator between sorted positions `i` and `i + 1` with keys `a` and `b` (codes with
+/// their sub-codes appended, [`BottomUp::key`]: at most 60 bits): 32 + the highest differing key
+/// bit, or, where the keys are equal, the highest differing bit of the positions (see
+/// [`BottomUp`]).
 #[inline(always)]
-fn separator(a: u32, b: u32, i: u32) -> u32 {
+fn separator(a: u64, b: u64, i: u32) -> u32 {
     let x = a ^ b;
     if x != 0 {
-        63 - x.leading_zeros()
+        95 - x.leading_zeros()
     } else {
         31 - (i ^ (i + 1)).leading_zeros()
     }
@@ -1212,16 +1366,20 @@ fn bucketed30(
     out.nodes.reserve((2 * n).saturating_sub(1));
     // The root's slot.
     out.nodes.push(<Node as bytemuck::Zeroable>::zeroed());
-    let mut bu = BottomUp::new(p, 0);
+    let bits = sub_bits(n, p);
+    let mut bu = BottomUp::new(p, 0, bits);
+    // `codes` is free after the scatter: the sub-codes of a bucket's runs.
+    let subs = codes;
     for w in start.windows(2) {
         let (a, b) = (w[0] as usize, (w[1] as usize).min(n));
         let Some(bucket) = alt.get(a..b) else { continue };
-        sorted_keys(bucket, keys, tmp);
-        for &k in keys.iter() {
+        let ordered = sorted_keys(bucket, keys, tmp, subs, bits);
+        for (j, &k) in keys.iter().enumerate() {
             // The low half of a key is a position in the bucket.
             if let Some(r) = bucket.get(k as u32 as usize) {
+                let sub = if ordered { subs.get(j).copied().unwrap_or(0) } else { 0 };
                 out.prim_indices.push(r.index());
-                bu.feed((k >> 32) as u32, r.with_tag(0), &mut out.nodes);
+                bu.feed((k >> 32) as u32, sub, r.with_tag(0), &mut out.nodes);
             }
         }
     }
@@ -1235,9 +1393,11 @@ fn top_digit(code: u32) -> usize {
 }
 
 /// The keys `(code << 32) | position` of a bucket's references (tagged with their codes),
-/// sorted ([`sort_bucket`]), into `keys`; `tmp` is scratch.
+/// sorted ([`sort_bucket`]) and with runs of equal codes ordered ([`order_runs`]), into `keys`;
+/// `tmp` is scratch. Returns whether a run was ordered with `bits > 0`: then `subs[j]` holds the
+/// top `bits` bits of key `j`'s sub-code (0 outside runs), else `subs` is untouched.
 #[inline]
-fn sorted_keys(bucket: &[PrimRef], keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
+fn sorted_keys(bucket: &[PrimRef], keys: &mut Vec<u64>, tmp: &mut Vec<u64>, subs: &mut Vec<u32>, bits: u32) -> bool {
     keys.clear();
     keys.extend(
         bucket
@@ -1246,7 +1406,21 @@ fn sorted_keys(bucket: &[PrimRef], keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
             .map(|(j, r)| u64::from(r.tag()) << 32 | j as u64),
     );
     sort_bucket(keys, tmp);
-    order_bucket_runs(keys, bucket, tmp);
+    let mut ordered = false;
+    order_bucket_runs(keys, bucket, tmp, |b, run| {
+        if bits == 0 {
+            return;
+        }
+        if !ordered {
+            ordered = true;
+            subs.clear();
+            subs.resize(bucket.len(), 0);
+        }
+        for (d, &k) in subs.iter_mut().skip(b).zip(run) {
+            *d = (k >> 32) as u32 >> (30 - bits);
+        }
+    });
+    ordered
 }
 
 /// [`bucketed30`] on `parts` threads (`std`), the same tree, node for node: the codes, the
@@ -1256,8 +1430,8 @@ fn sorted_keys(bucket: &[PrimRef], keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
 /// sequential pass joins them.
 ///
 /// Why a bucket is a subtree of the sequential tree: the separator between two buckets is at
-/// least `32 + 30 - TOP_BITS` (their codes differ in the top digit), larger than any separator
-/// inside a bucket, so the sequential pass joins a bucket's subtrees into one before it joins
+/// least `32 + bits + 30 - TOP_BITS` (their codes differ in the top digit; `bits` sub-code bits
+/// below them), larger than any separator inside a bucket, so the sequential pass joins a bucket's subtrees into one before it joins
 /// anything across a bucket's edge, in the same order as the bucket's own pass does; the
 /// buckets' roots (leaf candidates included) then meet in the order their separators give.
 #[cfg(feature = "std")]
@@ -1275,10 +1449,11 @@ fn bucketed30_par(
     const BUCKETS: usize = 1 << TOP_BITS;
     let n = refs.len();
     let start = scatter30_chunks(refs, alt, items, q, parts);
+    let bits = sub_bits(n, p);
     out.prim_indices.resize(n, 0);
     bucket_nodes.resize_with(BUCKETS, Vec::new);
-    // Each bucket's root, counters and first and last codes.
-    type Built = (Pending, Counters, u32, u32);
+    // Each bucket's root, counters and first and last keys.
+    type Built = (Pending, Counters, u64, u64);
     let mut built: Vec<Option<Built>> = alloc::vec![None; BUCKETS];
     {
         type Job<'a> = (usize, &'a mut [u32], &'a mut Vec<Node>, &'a mut Option<Built>);
@@ -1303,7 +1478,7 @@ fn bucketed30_par(
         let jobs: Vec<std::sync::Mutex<Option<Job<'_>>>> =
             jobs.into_iter().map(|j| std::sync::Mutex::new(Some(j))).collect();
         crate::par::each(0..parts, |_| {
-            let (mut keys, mut tmp) = (Vec::new(), Vec::new());
+            let (mut keys, mut tmp, mut subs) = (Vec::new(), Vec::new(), Vec::new());
             while let Some(job) = jobs.get(next.fetch_add(1, core::sync::atomic::Ordering::Relaxed)) {
                 let Some((a, prim, nodes, slot)) = job.lock().ok().and_then(|mut g| g.take()) else {
                     continue;
@@ -1311,16 +1486,19 @@ fn bucketed30_par(
                 let Some(bucket) = alt.get(a..a + prim.len()) else {
                     continue;
                 };
-                sorted_keys(bucket, &mut keys, &mut tmp);
-                let mut bu = BottomUp::new(p, a as u32);
-                for (&k, pi) in keys.iter().zip(prim.iter_mut()) {
+                let ordered = sorted_keys(bucket, &mut keys, &mut tmp, &mut subs, bits);
+                let sub = |j: usize| if ordered { subs.get(j).copied().unwrap_or(0) } else { 0 };
+                let mut bu = BottomUp::new(p, a as u32, bits);
+                for (j, (&k, pi)) in keys.iter().zip(prim.iter_mut()).enumerate() {
                     if let Some(r) = bucket.get(k as u32 as usize) {
                         *pi = r.index();
-                        bu.feed((k >> 32) as u32, r.with_tag(0), nodes);
+                        bu.feed((k >> 32) as u32, sub(j), r.with_tag(0), nodes);
                     }
                 }
-                let first = keys.first().map_or(0, |k| (k >> 32) as u32);
-                let last = keys.last().map_or(0, |k| (k >> 32) as u32);
+                let first = keys.first().map_or(0, |&k| bu.key((k >> 32) as u32, sub(0)));
+                let last = keys
+                    .last()
+                    .map_or(0, |&k| bu.key((k >> 32) as u32, sub(keys.len() - 1)));
                 *slot = bu.root(nodes).map(|root| (root, bu.c, first, last));
             }
         });
@@ -1328,7 +1506,7 @@ fn bucketed30_par(
     // The layout: the root's slot, then the buckets' nodes in order, each followed by the joins
     // its right edge makes (as the sequential pass appends them), those joins recorded with
     // their slots; then the buckets' nodes copied into place side by side.
-    let mut top = BottomUp::new(p, 0);
+    let mut top = BottomUp::new(p, 0, bits);
     let mut placed = Placed {
         len: 1,
         nodes: Vec::new(),
@@ -1337,7 +1515,7 @@ fn bucketed30_par(
     // Each bucket's slots in the node array, and its array.
     let mut regions: Vec<(usize, usize)> = Vec::with_capacity(BUCKETS);
     let mut sources: Vec<&Vec<Node>> = Vec::with_capacity(BUCKETS);
-    let mut pending: Option<(Pending, u32)> = None;
+    let mut pending: Option<(Pending, u64)> = None;
     for (b, nodes) in built.iter().zip(bucket_nodes.iter()) {
         let Some((mut root, bc, first, last)) = *b else {
             continue;
@@ -1444,15 +1622,29 @@ mod tests {
             |x, y, z| morton30_x8(x, y, z, &q).to_array(),
         );
         sort_items(&mut want_items, &mut Vec::new(), 30);
-        order_item_runs(&mut want_items, &refs, &mut Vec::new());
+        let mut want_runs = Runs::default();
+        want_runs.reset(12);
+        order_item_runs(&mut want_items, &refs, &mut Vec::new(), &mut want_runs);
         let (mut want_sorted, mut want_out) = (Vec::new(), Bvh2::default());
         gather(&refs, &mut want_sorted, &want_items, &mut want_out);
 
         let (mut alt, mut items, mut packed, mut tmp, mut out) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Bvh2::default());
-        sort_gather30(&mut refs, &mut alt, &mut items, &mut packed, &mut tmp, &q, &mut out);
+        let mut runs = Runs::default();
+        runs.reset(12);
+        sort_gather30(
+            &mut refs,
+            &mut alt,
+            &mut items,
+            &mut packed,
+            &mut tmp,
+            &q,
+            &mut out,
+            &mut runs,
+        );
         let keys = |v: &[Item<u32>]| v.iter().map(|it| it.key).collect::<Vec<_>>();
         assert_eq!(keys(&items), keys(&want_items));
+        assert_eq!(runs, want_runs);
         assert!(items.iter().enumerate().all(|(i, it)| it.val == i as u32));
         assert_eq!(out.prim_indices, want_out.prim_indices);
         let bits = |v: &[PrimRef]| v.iter().map(|r| bytemuck::cast::<_, [u32; 8]>(r.0)).collect::<Vec<_>>();
@@ -1519,7 +1711,9 @@ mod tests {
         for g in [0..5, 5..35, 35..47] {
             items[g].reverse();
         }
-        order_item_runs(&mut items, &refs, &mut Vec::new());
+        let mut runs = Runs::default();
+        runs.reset(30);
+        order_item_runs(&mut items, &refs, &mut Vec::new(), &mut runs);
         let vals = |g: core::ops::Range<usize>| items[g].iter().map(|it| it.val).collect::<Vec<_>>();
         // A short run and a run on one point: untouched.
         assert_eq!(vals(0..5), [4, 3, 2, 1, 0]);
@@ -1542,6 +1736,12 @@ mod tests {
         let level2: Vec<u32> = cluster.iter().map(|&i| morton(&cluster, i)).collect();
         assert!(level2.windows(2).all(|w| w[0] < w[1]), "{level2:?}");
         assert!(level1[at..at + 10].iter().all(|&c| c == level1[at]));
+        // The long run recorded with its level-1 sub-codes (in full: 30 bits), nothing else.
+        assert_eq!(runs.spans, [[5, 35, 0]]);
+        assert_eq!(runs.subs, level1);
+        assert_eq!(runs.subs_of(5, 35), Some(&level1[..]));
+        assert_eq!(runs.subs_of(10, 20), Some(&level1[5..15]));
+        assert_eq!((runs.subs_of(4, 10), runs.subs_of(30, 36)), (None, None));
     }
 
     #[test]
@@ -1556,11 +1756,23 @@ mod tests {
             let (mut alt, mut items, mut packed, mut tmp, mut want) =
                 (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Bvh2::default());
             let mut seq = refs.clone();
-            sort_gather30(&mut seq, &mut alt, &mut items, &mut packed, &mut tmp, &q, &mut want);
+            let (mut want_runs, mut runs) = (Runs::default(), Runs::default());
+            want_runs.reset(14);
+            sort_gather30(
+                &mut seq,
+                &mut alt,
+                &mut items,
+                &mut packed,
+                &mut tmp,
+                &q,
+                &mut want,
+                &mut want_runs,
+            );
             let want_items = keys(&items);
             for threads in [2, 3, 16] {
                 let mut par = refs.clone();
                 let mut out = Bvh2::default();
+                runs.reset(14);
                 sort_gather30_par(
                     &mut par,
                     &mut alt,
@@ -1569,8 +1781,10 @@ mod tests {
                     &mut tmp,
                     &q,
                     &mut out,
+                    &mut runs,
                     threads,
                 );
+                assert_eq!(runs, want_runs, "{threads} threads");
                 assert_eq!(bits(&par), bits(&seq), "{threads} threads");
                 assert_eq!(keys(&items), want_items, "{threads} threads");
                 assert_eq!(out.prim_indices, want.prim_indices, "{threads} threads");
@@ -1721,11 +1935,13 @@ mod tests {
                     packed,
                     packed_tmp,
                     codes,
+                    runs,
                     ..
                 } = &mut b;
                 let mut want = Bvh2::default();
-                sort_gather30(r2, alt, items32, packed, packed_tmp, &q, &mut want);
-                let cw = walk_sorted(r2, items32, &p, &mut want);
+                runs.reset(sub_bits(refs.len(), &p));
+                sort_gather30(r2, alt, items32, packed, packed_tmp, &q, &mut want, runs);
+                let cw = walk_sorted(r2, items32, runs, &p, &mut want);
                 let mut got = Bvh2::default();
                 let cg = bucketed30(&refs, alt, codes, packed, packed_tmp, &q, &p, &mut got);
                 let what = format!("scene {s} ({} boxes), leaves {min_leaf}..={max_leaf}", boxes.len());

@@ -208,13 +208,15 @@ pub enum BinAxes {
 ///
 /// ```
 /// use strahl::{Vec3, build::{BuildParams, Bvh2, MortonBits}};
-/// // 1,000 small triangles in a unit cube, and one 1,000 away: one 30-bit cell holds the cube.
+/// // 1,000 clusters of 4 tiny triangles in a unit cube: a 30-bit cell (1/1024 wide) holds a
+/// // cluster, 63-bit cells (1/2^21) tell its triangles apart.
 /// # let mut rng = strahl::scene::Rng::new(1);
-/// let mut tris: Vec<_> = (0..1000).map(|_| {
-///     let p = Vec3::new(rng.f32(), rng.f32(), rng.f32());
-///     [p, p + Vec3::X * 1e-3, p + Vec3::Y * 1e-3]
+/// let tris: Vec<_> = (0..4000).map(|i| {
+///     let mut r = strahl::scene::Rng::new(i / 4);
+///     let c = Vec3::new(r.f32(), r.f32(), r.f32());
+///     let p = c + Vec3::new(rng.f32(), rng.f32(), rng.f32()) * 1e-5;
+///     [p, p + Vec3::X * 1e-6, p + Vec3::Y * 1e-6]
 /// }).collect();
-/// tris.push([Vec3::splat(1e3), Vec3::splat(1e3) + Vec3::X, Vec3::splat(1e3) + Vec3::Y]);
 /// let p = BuildParams::fastest();
 /// assert_eq!(p.morton_bits, MortonBits::Bits30);
 /// let leaves = |morton_bits| Bvh2::build(&tris[..], &BuildParams { morton_bits, ..p }).unwrap().1.leaves;
@@ -431,13 +433,11 @@ impl BuildParams {
     ///
     /// **Far outliers.** Morton codes quantise the box of all centroids: one triangle far from the
     /// rest (a sky or a distant ground triangle) leaves the rest in a few grid cells. Runs of
-    /// equal codes are put in the Morton order of their own bounds, so such a tree still cuts the
-    /// cell in space, but the LBVH splits a run at the balanced point of that order rather than
-    /// where the finer codes differ. Measured (AMD EPYC, Zen 1; 100,000 triangles in a unit cube
-    /// beside one 10^7 away, 100,000 rays into the cube through the BVH8; `tests/build_speed.rs`'s
-    /// `far_outlier`): 421 ms with `fastest()` against 229 ms without the outlier (46.7 s before
-    /// runs were ordered); [`ploc`](Self::ploc) and [`hybrid_sah`](Self::hybrid_sah) trace it
-    /// within 4% of their time without the outlier.    ///
+    /// equal codes are put in the Morton order of their own bounds and split by those finer
+    /// codes, so such a tree still cuts the cell in space. Measured (AMD EPYC, Zen 1; 100,000
+    /// triangles in a unit cube beside one 10^7 away, 100,000 rays into the cube through the
+    /// BVH8; `tests/build_speed.rs`'s `far_outlier`): 230 ms with `fastest()` against 225 ms
+    /// without the outlier (46.7 s before runs were ordered).    ///
     /// ```
     /// use strahl::build::{BuildParams, Bvh2, MortonBits, Strategy};
     /// let p = BuildParams::fastest();

@@ -37,6 +37,8 @@ type Link = [u32; 2];
 /// thread.
 pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut Bvh2, threads: usize) -> Counters {
     let cb = info.cbounds.to_aabb();
+    // PLOC merges neighbours in the sorted order: the runs' order is all it needs of them.
+    b.runs.reset(0);
     // The references in Morton order: in `refs` (30-bit codes) or in `alt` (63-bit).
     let sorted_in_alt = match p.morton_bits {
         MortonBits::Bits30 => {
@@ -49,6 +51,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 &mut b.packed_tmp,
                 &q,
                 out,
+                &mut b.runs,
                 threads,
             );
             false
@@ -62,7 +65,7 @@ pub(crate) fn build(b: &mut Builder, info: &PrepInfo, p: &BuildParams, out: &mut
                 |x, y, z| morton63_x8(x, y, z, &q),
             );
             sort_items(&mut b.items64, &mut b.tmp64, 63);
-            order_item_runs(&mut b.items64, &b.refs, &mut b.packed);
+            order_item_runs(&mut b.items64, &b.refs, &mut b.packed, &mut b.runs);
             out.prim_indices.clear();
             gather(&b.refs, &mut b.alt, &b.items64, out);
             true
