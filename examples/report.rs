@@ -1134,7 +1134,9 @@ fn section_morton(dir: &Path) -> Res<String> {
          **Trade-off.** `MortonBits::Bits30` quantises each axis of the centroid bounds to 1,024 \
          cells and sorts in 3 radix passes; `Bits63` uses 2,097,152 cells per axis and 6 passes. \
          Where the scene's extent dwarfs its detail, 30-bit codes collide (many primitives in one \
-         cell), and the LBVH splits runs of equal codes at their middle, blind to geometry.\n\n\
+         cell); the builders then order each run of equal codes by codes over the run's own bounds \
+         and split it by those (the LBVH keeping as many of their bits as the depth bound leaves), \
+         so what 63 bits buy there is mostly fewer such runs.\n\n\
          **How measured.** LBVH (`BuildParams::fastest()`) and HLBVH (`hybrid()` without the \
          treelet pass, clusters of 32, binned-SAH top) with either code width; builds, SAH cost and \
          traces measured as in section 2. Distinct codes: distinct centroid codes per primitive \

@@ -531,8 +531,8 @@ fn cube_cost(bvh: &Bvh2) -> f64 {
 /// The Morton builders beside one far outlier: the outlier leaves the cube's 100,000 triangles in
 /// one grid cell, one run of equal codes, which is put in the Morton order of its own bounds and
 /// split by those finer codes. Without that the run stayed in input order and the cube's part of
-/// the tree cost 320x that built without the outlier (tracing 100,000 rays into the cube took
-/// 300x as long); ordered but split at the balanced points of its order, 2.2-2.6x (LBVH, HLBVH).
+/// the tree cost 318x that built without the outlier (tracing 100,000 rays into the cube took
+/// about 200x as long); ordered but split at the balanced points of its order, 2.2-2.6x (LBVH, HLBVH).
 /// Measured now: the LBVH 1.04x (16 sub-code bits for 100,001 references under the depth bound
 /// of 64), the others 1.00x.
 #[test]

@@ -83,12 +83,13 @@ fn interior_area_below(b: &Bvh2, max: f32) -> f64 {
         .sum()
 }
 
-/// A tree whose boxes overlap wholesale (20,000 triangles of sizes from 0.001 to 1 whose
-/// centroids are all one point, so that every box holds that point) leaves a search nothing to
-/// prune: each one stops at `REINSERT_SEARCH_BUDGET` visits with the best place seen, and the
-/// pass still lowers the cost without raising it anywhere. (Unbounded, 3 rounds over such a tree
-/// of 100,000 triangles took 84 s: the LBVH of triangles in a unit cube beside one 10^7 away,
-/// when the Morton builders left the cube's one grid cell in input order.)
+/// A tree whose boxes overlap wholesale (20,000 triangles of sizes from 0.001 to 1, each with its
+/// vertices' mean at one point, so that every box holds that point; and one triangle 10^7 away,
+/// so that the root's area dwarfs theirs) leaves a search nothing to prune: each one stops at
+/// `REINSERT_SEARCH_BUDGET` visits with the best place seen, and the pass still lowers the cost
+/// without raising it anywhere. (Unbounded, 3 rounds over such a tree of 100,000 triangles took
+/// 84 s: the LBVH of triangles in a unit cube beside one 10^7 away, when the Morton builders left
+/// the cube's one grid cell in input order.)
 #[test]
 fn searches_stop_at_the_budget_where_boxes_overlap() {
     let mut seed = 0x9e37_79b9_7f4a_7c15u64;
@@ -99,7 +100,7 @@ fn searches_stop_at_the_budget_where_boxes_overlap() {
         (seed >> 40) as f32 / (1u64 << 24) as f32
     };
     let c = Vec3::splat(0.5);
-    let tris: Vec<Triangle> = (0..20_000)
+    let mut tris: Vec<Triangle> = (0..20_000)
         .map(|_| {
             let size = 10f32.powf(-3.0 * f());
             let u = (Vec3::new(f(), f(), f()) - 0.5) * size;
@@ -107,6 +108,8 @@ fn searches_stop_at_the_budget_where_boxes_overlap() {
             [c + u, c + v, c - u - v]
         })
         .collect();
+    let far = Vec3::splat(1e7);
+    tris.push([far, far + Vec3::X, far + Vec3::Y]);
     let (mut bvh, _) = Bvh2::build(&tris[..], &BuildParams::fastest()).unwrap();
     let (before, leaves_before) = (interior_area_below(&bvh, 2.0), leaves(&bvh));
     let whole_before = interior_area_below(&bvh, f32::INFINITY);

@@ -51,7 +51,8 @@ pub struct Builder {
     /// radix-sort scratch.
     pub(crate) packed: Vec<u64>,
     pub(crate) packed_tmp: Vec<u64>,
-    /// The bottom-up LBVH's codes, in input order.
+    /// The bottom-up LBVH's codes, in input order; after its scatter, the sub-codes of a
+    /// bucket's ordered runs.
     pub(crate) codes: Vec<u32>,
     /// The full sweep's suffix areas and side flags.
     pub(crate) suffix: Vec<f32>,

@@ -601,7 +601,7 @@ const RUN_LEVELS: u32 = 3;
 /// input order, so the balanced splits of the run cut nothing in space and every box in it spans
 /// the cell. Runs are rare where the centroids spread over the grid, and long where they do not:
 /// one far outlier puts everything else in one cell (100,000 triangles in the unit cube beside
-/// one at 10^7: the LBVH's cost inside the cube 320x that without the outlier; ordered, 2.6x;
+/// one at 10^7: the LBVH's cost inside the cube 318x that without the outlier; ordered, 2.6x;
 /// split by the sub-codes too, 1.04x).
 pub(crate) fn order_runs<T>(
     items: &mut [T],
@@ -1074,7 +1074,7 @@ impl Pending {
 /// Apetrei ("Fast and Simple Agglomerative LBVH Construction", 2014) builds it bottom-up: a
 /// subtree on the stack joins the one to its right while its separator is smaller than the
 /// next. Boxes are unions on the way up; the leaves are the largest subtrees that qualify (at
-/// most `min_leaf_size` references, or at most `max_leaf_size` with equal codes), exactly those
+/// most `min_leaf_size` references, or at most `max_leaf_size` with equal keys), exactly those
 /// where the top-down walk stops. A finished interior node appends its children's pair to the
 /// node array, so every subtree's nodes are contiguous and children come before their parent
 /// (the root, at index 0, excepted). No binary searches, and the references are read once.
@@ -1227,7 +1227,7 @@ impl BottomUp {
     fn close(&mut self, mut cur: Pending, nodes: &mut impl NodeSink) -> Pending {
         while self.len > 0 {
             self.len -= 1;
-            let l = self.subs[self.len & 63];
+            let l = self.subs[self.len & 127];
             cur = self.join(l, cur, nodes);
         }
         cur
@@ -1312,11 +1312,11 @@ fn separator(a: u64, b: u64, i: u32) -> u32 {
 ///    ([`PrimRef::with_tag`]).
 /// 3. Bucket by bucket (about 16,000 references of a 1M-triangle even scene): a sequential read of its
 ///    references makes the keys `(code << 32) | position in the bucket` and brings them into the
-///    cache; [`sort_bucket`] sorts the keys; the references are fed to [`BottomUp`] in that
-///    order, from the cache.
+///    cache; [`sort_bucket`] sorts the keys and [`order_runs`] orders the runs of equal codes,
+///    whose sub-codes go to `codes` (free after step 2); the references are fed to [`BottomUp`]
+///    in that order with their sub-codes, from the cache.
 ///
-/// The order is that of a stable sort by code, as [`sort_gather30`] makes it, but the sorted
-/// references are never written out.
+/// The order is [`sort_gather30`]'s, but the sorted references are never written out.
 // PERF: see the module docs.
 #[allow(clippy::too_many_arguments)]
 fn bucketed30(
@@ -1674,10 +1674,6 @@ mod tests {
         [spread, grid, cluster]
     }
 
-    /// The parallel front end gives the sequential one's codes, references (bit for bit) and
-    /// primitive indices, on spread, gridded and clustered boxes and thread counts that leave
-    /// ragged last chunks.
-    #[cfg(feature = "std")]
     /// Runs of equal codes after [`order_item_runs`]: a short run keeps its order; a long run
     /// takes the Morton order of its own bounds, and a cluster within it (one sub-code) that of
     /// the cluster's bounds; a run on one point keeps its order.
@@ -1744,6 +1740,10 @@ mod tests {
         assert_eq!((runs.subs_of(4, 10), runs.subs_of(30, 36)), (None, None));
     }
 
+    /// The parallel front end gives the sequential one's codes, references (bit for bit),
+    /// primitive indices and runs, on spread, gridded and clustered boxes and thread counts that
+    /// leave ragged last chunks.
+    #[cfg(feature = "std")]
     #[test]
     fn sort_gather30_par_matches_sequential() {
         let [spread, grid, cluster] = large_scenes(200_003, 12);

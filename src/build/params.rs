@@ -262,7 +262,7 @@ pub enum MortonCells {
 ///
 /// | preset | strategy | bins | leaf size | builds | tree |
 /// |---|---|---|---|---|---|
-/// | [`fastest`](Self::fastest) | LBVH, 30-bit | | 2, up to 4 on equal codes | fastest | worst SAH |
+/// | [`fastest`](Self::fastest) | LBVH, 30-bit | | 2, up to 4 on equal codes (and kept sub-codes) | fastest | worst SAH |
 /// | [`fast`](Self::fast) | binned SAH, longest axis, large nodes from a sample | 8 | 1 ..= 8 | fast | good |
 /// | [`balanced`](Self::balanced) (= `default()`) | binned SAH, all axes, nodes of 32K+ from a sample | 16 | 1 ..= 8 | medium | better |
 /// | [`high`](Self::high) | binned SAH, all axes, + one round of rotations | 64 | 1 ..= 8 | medium-slow | best: at or below `quality` on the 1M scenes |
@@ -428,7 +428,8 @@ impl BuildParams {
     }
 
     /// The fastest build: LBVH over 30-bit Morton codes, leaves of up to 2 primitives (up to 4
-    /// where codes coincide). Measured: two-primitive leaves build about 20% faster than Karras'
+    /// where codes coincide, and within a long run of equal codes the finer codes kept by
+    /// [`BuildParams::max_depth`] too). Measured: two-primitive leaves build about 20% faster than Karras'
     /// single-primitive ones, with an SAH cost within 2% either way.
     ///
     /// **Far outliers.** Morton codes quantise the box of all centroids: one triangle far from the
@@ -437,7 +438,8 @@ impl BuildParams {
     /// codes, so such a tree still cuts the cell in space. Measured (AMD EPYC, Zen 1; 100,000
     /// triangles in a unit cube beside one 10^7 away, 100,000 rays into the cube through the
     /// BVH8; `tests/build_speed.rs`'s `far_outlier`): 230 ms with `fastest()` against 225 ms
-    /// without the outlier (46.7 s before runs were ordered).    ///
+    /// without the outlier (46.7 s before runs were ordered).
+    ///
     /// ```
     /// use strahl::build::{BuildParams, Bvh2, MortonBits, Strategy};
     /// let p = BuildParams::fastest();

@@ -106,10 +106,10 @@ pub struct ReinsertStats {
 ///
 /// On trees whose boxes overlap wholesale nothing can be pruned, and an unbounded search visits
 /// most of the tree for every move: the LBVH of 100,000 triangles in a unit cube beside one
-/// triangle 10^7 away (every cube triangle in one Morton cell, so the tree over them follows the
-/// input order) took 84 s for 3 rounds over every node (AMD EPYC, Zen 1), its searches visiting
+/// triangle 10^7 away, when the Morton builders still left the cube's one grid cell in input
+/// order, took 84 s for 3 rounds over every node (AMD EPYC, Zen 1), its searches visiting
 /// 10,810 nodes at the median and up to 40,684; with the budget about 5 s (the build itself
-/// 0.35 s). On the trees of `fastest()` and `fast()` over a 100,000-triangle soup, the cube
+/// 0.35 s). Such trees still come from triangles whose boxes all share a point. On the trees of `fastest()` and `fast()` over a 100,000-triangle soup, the cube
 /// alone, a 116,000-triangle sphereflake and the bunny (3 rounds over every node) no search
 /// visited more than 169 nodes (the median 23-39), so the budget cuts none there.
 ///

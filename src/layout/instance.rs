@@ -1529,6 +1529,13 @@ mod tests {
     use super::*;
     use crate::layout::Bvh4;
 
+    /// One BLAS: the 4-wide BVH of an icosphere subdivided `level` times.
+    fn sphere_blas(level: u32) -> [Bvh4; 1] {
+        let tris = crate::scene::icosphere(level).to_soup();
+        let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+        [Bvh4::from_bvh2(&b2, &tris[..]).unwrap()]
+    }
+
     /// The union of the masks of the instances below child code `c`.
     fn below(nodes: &[TlasNode], masks: &[u32], c: u32) -> u32 {
         if c == EMPTY_CHILD {
@@ -1548,9 +1555,7 @@ mod tests {
         // Refitted to other placements (every instance moved and turned, some left out) and
         // back: the 4-wide nodes (boxes, codes, masks) and the binary tree are the build's, bit
         // for bit; in between, every slot's box is the union of the boxes below it.
-        let tris = crate::scene::icosphere(2).to_soup();
-        let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
-        let blases = [Bvh4::from_bvh2(&b2, &tris[..]).unwrap()];
+        let blases = sphere_blas(2);
         let mut rng = crate::scene::Rng::new(6);
         let mut place_all = |spread: f32| -> Vec<Instance> {
             (0..200)
@@ -1608,9 +1613,7 @@ mod tests {
 
     #[test]
     fn slot_masks_are_the_union_below() {
-        let tris = crate::scene::icosphere(1).to_soup();
-        let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
-        let blases = [Bvh4::from_bvh2(&b2, &tris[..]).unwrap()];
+        let blases = sphere_blas(1);
         let mut rng = crate::scene::Rng::new(5);
         let inst: Vec<Instance> = (0..300)
             .map(|i| {
