@@ -1890,7 +1890,8 @@ mod tests {
     }
 
     /// The bottom-up LBVH against the top-down walk over the same order: the same tree (up to
-    /// where nodes sit in the array), leaves, slots, depth.
+    /// where nodes sit in the array), leaves, slots, depth; under the default depth bound and one
+    /// that leaves runs 2 or 3 sub-code bits.
     #[test]
     fn bottom_up_equals_the_top_down_walk() {
         let mut r = Rng::new(17);
@@ -1916,11 +1917,19 @@ mod tests {
             cluster.push(Aabb::new(Vec3::splat(1e3), Vec3::splat(1e3 + 1.0)));
             scenes.extend([spread, grid, same, cluster]);
         }
+        let mut partial = 0;
         for (s, boxes) in scenes.iter().enumerate() {
-            for (min_leaf, max_leaf) in [(1, 1), (1, 4), (2, 4), (4, 8), (3, 3)] {
+            // The default depth bound, and one that leaves 2 or 3 sub-code bits (or 0 where the
+            // least accepted bound leaves none).
+            let tight = (33 + super::super::prims::ceil_log2(boxes.len() as u32)).max(super::super::MIN_DEPTH);
+            let cases = [(1, 1), (1, 4), (2, 4), (4, 8), (3, 3)]
+                .into_iter()
+                .flat_map(|leaves| [(leaves, 64), (leaves, tight)]);
+            for ((min_leaf, max_leaf), max_depth) in cases {
                 let p = BuildParams {
                     min_leaf_size: min_leaf,
                     max_leaf_size: max_leaf,
+                    max_depth,
                     ..BuildParams::fastest()
                 };
                 let mut b = Builder::new();
@@ -1942,9 +1951,14 @@ mod tests {
                 runs.reset(sub_bits(refs.len(), &p));
                 sort_gather30(r2, alt, items32, packed, packed_tmp, &q, &mut want, runs);
                 let cw = walk_sorted(r2, items32, runs, &p, &mut want);
+                // Runs split by some but not all of their sub-code bits.
+                partial += usize::from(!runs.spans.is_empty() && (1..30).contains(&runs.bits));
                 let mut got = Bvh2::default();
                 let cg = bucketed30(&refs, alt, codes, packed, packed_tmp, &q, &p, &mut got);
-                let what = format!("scene {s} ({} boxes), leaves {min_leaf}..={max_leaf}", boxes.len());
+                let what = format!(
+                    "scene {s} ({} boxes), leaves {min_leaf}..={max_leaf}, depth {max_depth}",
+                    boxes.len()
+                );
                 assert_eq!(got.prim_indices, want.prim_indices, "{what}");
                 assert_eq!(got.nodes.len(), want.nodes.len(), "{what}");
                 assert_eq!(
@@ -1967,5 +1981,6 @@ mod tests {
                 );
             }
         }
+        assert!(partial > 10, "{partial} builds split runs by part of their sub-codes");
     }
 }
