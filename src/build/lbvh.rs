@@ -173,9 +173,8 @@ pub(crate) fn codes_of<K: Copy>(
     }
     let base = codes.len() as u32;
     for (i, r) in chunks.remainder().iter().enumerate() {
-        let v = r.c2().to_array();
         codes.push(Item {
-            key: one(Vec3::new(v[0], v[1], v[2])),
+            key: one(r.c2_vec3()),
             val: base + i as u32,
         });
     }
@@ -575,8 +574,7 @@ fn each_code30(refs: &[PrimRef], q: &MortonQuantizer, mut f: impl FnMut(usize, u
         at += 8;
     }
     for (j, r) in chunks.remainder().iter().enumerate() {
-        let v = r.c2().to_array();
-        f(at + j, morton30_scalar(Vec3::new(v[0], v[1], v[2]), q));
+        f(at + j, morton30_scalar(r.c2_vec3(), q));
     }
 }
 
@@ -685,13 +683,6 @@ fn recode(keys: &mut [u64], c2: &impl Fn(u32) -> Vec3, level: u32) {
     }
 }
 
-/// The centroid (doubled) of a reference as a `Vec3`.
-#[inline]
-fn c2_of(r: &PrimRef) -> Vec3 {
-    let v = r.c2().to_array();
-    Vec3::new(v[0], v[1], v[2])
-}
-
 /// [`order_runs`] on sorted `items` whose values are positions in `refs`; the runs into `runs`.
 pub(crate) fn order_item_runs<K: PartialEq>(
     items: &mut [Item<K>],
@@ -704,7 +695,7 @@ pub(crate) fn order_item_runs<K: PartialEq>(
         |a, b| a.key == b.key,
         |it| it.val,
         |it, at| it.val = at,
-        |at| refs.get(at as usize).map_or(Vec3::ZERO, c2_of),
+        |at| refs.get(at as usize).map_or(Vec3::ZERO, PrimRef::c2_vec3),
         scratch,
         |b, keys| runs.push(b, keys),
     );
@@ -717,7 +708,7 @@ fn order_bucket_runs(keys: &mut [u64], src: &[PrimRef], scratch: &mut Vec<u64>, 
         |a, b| a >> 32 == b >> 32,
         |&k| k as u32,
         |k, at| *k = *k >> 32 << 32 | u64::from(at),
-        |at| src.get(at as usize).map_or(Vec3::ZERO, c2_of),
+        |at| src.get(at as usize).map_or(Vec3::ZERO, PrimRef::c2_vec3),
         scratch,
         emit,
     );
@@ -747,8 +738,7 @@ impl Runs {
     /// Records the run at sorted positions `begin..` with keys `keys` (see [`order_runs`]),
     /// unless its sub-codes' kept bits are all equal (nothing to split by).
     fn push(&mut self, begin: usize, keys: &[u64]) {
-        let shift = 30 - self.bits;
-        let sub = |k: u64| (k >> 32) as u32 >> shift;
+        let sub = |k: u64| kept_sub(k, self.bits);
         if self.bits == 0 || keys.first().map(|&k| sub(k)) == keys.last().map(|&k| sub(k)) {
             return;
         }
@@ -768,9 +758,6 @@ impl Runs {
     /// The sub-codes of sorted positions `b..e` where they lie in one recorded run.
     #[inline]
     pub(crate) fn subs_of(&self, b: u32, e: u32) -> Option<&[u32]> {
-        if self.spans.is_empty() {
-            return None;
-        }
         let [sb, se, at] = *self
             .spans
             .get(self.spans.partition_point(|s| s[0] <= b).checked_sub(1)?)?;
@@ -785,6 +772,13 @@ impl Runs {
     fn same_subs(&self, b: u32, e: u32) -> bool {
         self.subs_of(b, e).is_none_or(|s| s.first() == s.last())
     }
+}
+
+/// The top `bits` bits (at most 30) of the level-1 sub-code in the high half of an
+/// [`order_runs`] key.
+#[inline]
+fn kept_sub(key: u64, bits: u32) -> u32 {
+    (key >> 32) as u32 >> (30 - bits.min(30))
 }
 
 /// Sub-code bits the LBVH splits runs by ([`Runs`]) for `n` references: what the depth bound
@@ -1417,7 +1411,7 @@ fn sorted_keys(bucket: &[PrimRef], keys: &mut Vec<u64>, tmp: &mut Vec<u64>, subs
             subs.resize(bucket.len(), 0);
         }
         for (d, &k) in subs.iter_mut().skip(b).zip(run) {
-            *d = (k >> 32) as u32 >> (30 - bits);
+            *d = kept_sub(k, bits);
         }
     });
     ordered

@@ -261,6 +261,13 @@ impl PrimRef {
         hi - nlo
     }
 
+    /// Twice the centroid as a `Vec3` ([`c2`](Self::c2) without its fourth lane).
+    #[inline(always)]
+    pub fn c2_vec3(&self) -> Vec3 {
+        let v = self.c2().to_array();
+        Vec3::new(v[0], v[1], v[2])
+    }
+
     /// Twice the centroid's coordinate on `axis` (0..3).
     #[inline(always)]
     pub fn c2_axis(&self, axis: usize) -> f32 {
