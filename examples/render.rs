@@ -1,8 +1,9 @@
 //! The main job: build a BVH, collapse it to BVH8, and render primary rays with normal shading
 //! plus ambient occlusion (any-hit rays), multithreaded over image tiles, into PNGs; print what
 //! was measured. The third built-in scene is instanced: 36 bunnies placed by a TLAS over one
-//! BVH8 (single rays there: packets do not go through instances). The fourth is the bunny with
-//! holes cut by an alpha mask, a hit filter (`HitFilter`) on every primary and AO ray.
+//! BVH8 (camera tiles as packets through the instances, `Tlas::intersect8`). The fourth is
+//! the bunny with holes cut by an alpha mask, a hit filter (`HitFilter`) on every primary and AO
+//! ray (single rays there: packets take no filter).
 //!
 //! ```sh
 //! cargo run --release --example render                 # the bundled bunny, a sphereflake, 36 bunny instances, a cut-out bunny

@@ -56,10 +56,11 @@
 //! | feature | default | what it adds |
 //! |---|---|---|
 //! | (none) | | all kernels: slab test, triangle tests, Morton codes, volume marching, on caller-provided slices; `#![no_std]`, no allocation |
-//! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); [`volume::MacrocellGrid::build`] in a `Vec`; [`build`] (BVH2 builders, reusable [`build::Builder`] memory) |
-//! | `std` | yes | `alloc`, plus std's float intrinsics in `glam`; threads ([`composite::ThreadTransport`], [`composite::render_tiles`]) |
+//! | `alloc` | | [`scene`] (OBJ reader, procedural meshes); [`volume::MacrocellGrid::build`] in a `Vec`; [`build`] (BVH2 builders, reusable [`build::Builder`] memory); owned wide BVHs ([`layout::Bvh4`], [`layout::Bvh8`]: collapse, refit, saving) and instancing ([`layout::Tlas`]) |
+//! | `std` | yes | `alloc`, plus std's float intrinsics in `glam`; threads: parallel BVH2 builds (spatial splits included), collapse and refit, threaded batch traversal, [`composite::ThreadTransport`], [`composite::render_tiles`] |
 //! | `hugepages` | yes | `std`; on Linux, [`layout::Bvh4`]/[`layout::Bvh8`] arrays of 4 MiB and more advised for transparent huge pages (`madvise`, through `libc`): fewer TLB misses on large trees, same results |
 //! | `mpi` | | [`composite`]'s `MpiTransport` over the system's MPI library (`libopenmpi-dev`, `libclang-dev`) |
+//! | `embree`, `tinybvh` | | benches only: the peer libraries (see the README) |
 //!
 //! ## Where the tunables live
 //! | stage | knob | where |

@@ -934,7 +934,8 @@ fn refit_on_threads_is_the_refit() {
     let mut one = Tlas::build(&before, &b8).unwrap();
     assert!(one.refit(&after, &b8));
     let rays = rays(200, &after, 100.0, 83);
-    for threads in 1..=4 {
+    // 0 and usize::MAX threads (clamped to 1 and MAX_THREADS) as well.
+    for threads in [0, 1, 2, 3, 4, usize::MAX] {
         let mut par = Tlas::build(&before, &b8).unwrap();
         assert!(par.refit_par(&after, &b8, threads));
         assert_eq!(par.bvh().nodes, one.bvh().nodes, "{threads} threads");

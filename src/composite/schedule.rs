@@ -153,6 +153,18 @@ impl KVec {
     pub fn stride(&self, round: usize) -> u32 {
         self.as_slice()[..round.min(self.len)].iter().product()
     }
+
+    /// The group size of `round`: its factor, and 1 past the last round (where every rank is a
+    /// group of its own, with nothing to send).
+    ///
+    /// ```
+    /// use strahl::composite::KVec;
+    /// let k = KVec::new(&[3, 2]).unwrap();
+    /// assert_eq!([k.factor(0), k.factor(1), k.factor(2)], [3, 2, 1]);
+    /// ```
+    pub fn factor(&self, round: usize) -> u32 {
+        self.as_slice().get(round).copied().unwrap_or(1)
+    }
 }
 
 /// One message of a round: `from` sends the pixels `range` to `to` (virtual ranks).
@@ -181,9 +193,16 @@ pub struct Message {
 /// assert_eq!(piece(&(0..10), 1, 3), 3..6);
 /// assert_eq!(piece(&(0..10), 2, 3), 6..10); // uneven pieces differ by at most one pixel
 /// assert!(piece(&(100..102), 0, 4).is_empty()); // more pieces than pixels: some are empty
+/// // Out of range: no pieces (`k == 0`), a piece past the last, a reversed range: all empty.
+/// assert!(piece(&(0..10), 0, 0).is_empty() && piece(&(0..10), 3, 3).is_empty());
+/// assert!(piece(&core::ops::Range { start: 10, end: 0 }, 0, 2).is_empty());
 /// ```
 pub fn piece(r: &Range<u32>, j: u32, k: u32) -> Range<u32> {
-    let n = (r.end - r.start) as u64;
+    if k == 0 || j >= k {
+        return r.start..r.start;
+    }
+    let n = r.end.saturating_sub(r.start) as u64;
+    // `j + 1 <= k`, so `at` stays within `r.start..=r.end`.
     let at = |j: u32| r.start + (j as u64 * n / k as u64) as u32;
     at(j)..at(j + 1)
 }
@@ -270,9 +289,10 @@ impl RadixK {
     /// use strahl::composite::{KVec, RadixK};
     /// let s = RadixK::new(KVec::new(&[3, 2]).unwrap(), 100);
     /// assert_eq!((s.digit(5, 0), s.digit(5, 1)), (2, 1)); // 5 = 2 + 3 * 1
+    /// assert_eq!(s.digit(5, 2), 0); // past the last round ([`KVec::factor`] is 1)
     /// ```
     pub fn digit(&self, v: u32, round: usize) -> u32 {
-        (v / self.kvec.stride(round)) % self.kvec.as_slice()[round]
+        (v / self.kvec.stride(round)) % self.kvec.factor(round)
     }
 
     /// The members of `v`'s group in `round`, in digit (= visibility) order. Groups larger than
@@ -285,9 +305,10 @@ impl RadixK {
     /// assert_eq!(s.group(5, 0), [4, 5]); // 5 = 0b101: flip bit 0,
     /// assert_eq!(s.group(5, 1), [5, 7]); // then bit 1,
     /// assert_eq!(s.group(5, 2), [1, 5]); // then bit 2
+    /// assert_eq!(s.group(5, 3), [5]); // past the last round: alone
     /// ```
     pub fn group(&self, v: u32, round: usize) -> Group {
-        let k = self.kvec.as_slice()[round];
+        let k = self.kvec.factor(round);
         let mut g = Group {
             ranks: [0; MAX_GROUP],
             len: (k as usize).min(MAX_GROUP),
@@ -309,7 +330,8 @@ impl RadixK {
     /// ```
     pub fn member(&self, v: u32, round: usize, j: u32) -> u32 {
         let s = self.kvec.stride(round);
-        v - self.digit(v, round) * s + j * s
+        // `digit * s <= v`; a `j` past the group saturates instead of overflowing.
+        (v - self.digit(v, round) * s).saturating_add(j.saturating_mul(s))
     }
 
     /// The pixel range `v` holds at the start of `round` (`round == rounds` gives the final one).
@@ -324,7 +346,7 @@ impl RadixK {
     pub fn region(&self, v: u32, round: usize) -> Range<u32> {
         let mut r = 0..self.pixels;
         for i in 0..round.min(self.kvec.rounds()) {
-            r = piece(&r, self.digit(v, i), self.kvec.as_slice()[i]);
+            r = piece(&r, self.digit(v, i), self.kvec.factor(i));
         }
         r
     }
@@ -350,9 +372,10 @@ impl RadixK {
     /// assert_eq!(sent, [Message { from: 1, to: 0, range: 0..3 }, Message { from: 1, to: 2, range: 6..9 }]);
     /// // Every send is one of its receiver's receives.
     /// assert!(sent.iter().all(|m| s.receives(m.to, 0).any(|r| r == *m)));
+    /// assert_eq!(s.sends(1, 1).count() + s.receives(1, 1).count(), 0); // past the last round
     /// ```
     pub fn sends(&self, v: u32, round: usize) -> impl Iterator<Item = Message> + '_ {
-        let k = self.kvec.as_slice()[round];
+        let k = self.kvec.factor(round);
         let d = self.digit(v, round);
         let r = self.region(v, round);
         (0..k).filter(move |&j| j != d).map(move |j| Message {
@@ -372,7 +395,7 @@ impl RadixK {
     /// assert!(s.receives(1, 0).all(|m| m.range == (3..6))); // rank 1's piece from each
     /// ```
     pub fn receives(&self, v: u32, round: usize) -> impl Iterator<Item = Message> + '_ {
-        let k = self.kvec.as_slice()[round];
+        let k = self.kvec.factor(round);
         let d = self.digit(v, round);
         let mine = piece(&self.region(v, round), d, k);
         (0..k).filter(move |&j| j != d).map(move |j| Message {
@@ -607,6 +630,43 @@ mod tests {
             mixed,
             auto_kvec(p, 1000, 16, &CostModel::shared_memory()),
         ]
+    }
+
+    /// Arguments out of range (a round past the last, a member past the group, ranks past the
+    /// last, pieces of nothing) answer without a panic: a round past the last is a group of one
+    /// that sends and receives nothing and keeps the final region.
+    #[test]
+    fn out_of_range_arguments_answer_without_panic() {
+        for kvec in factorisations(12) {
+            let rounds = kvec.rounds();
+            let s = RadixK::new(kvec, 1000);
+            for v in [0, 5, 11, 12, u32::MAX] {
+                for round in rounds..rounds + 3 {
+                    assert_eq!(s.digit(v, round), 0);
+                    assert_eq!(s.group(v, round), [v]);
+                    assert_eq!(s.sends(v, round).count() + s.receives(v, round).count(), 0);
+                    assert_eq!(s.region(v, round), s.final_region(v));
+                }
+                for round in 0..rounds {
+                    let _ = s.member(v, round, u32::MAX);
+                    let _ = (
+                        s.group(v, round),
+                        s.sends(v, round).count(),
+                        s.receives(v, round).count(),
+                    );
+                }
+            }
+        }
+        for (r, j, k) in [
+            (0..10, 0, 0),
+            (0..10, 5, 3),
+            (0..10, u32::MAX, u32::MAX),
+            (Range { start: 10, end: 0 }, 0, 2),
+            (0..u32::MAX, 1, 2),
+        ] {
+            let p = piece(&r, j, k);
+            assert!(p.start <= p.end && p.end <= r.end.max(r.start), "{r:?} {j} {k}: {p:?}");
+        }
     }
 
     #[test]

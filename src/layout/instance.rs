@@ -624,6 +624,30 @@ impl Tlas {
     /// them, so bringing them in takes a rebuild ([`left_out`](Self::left_out) counts both).
     /// Returns `false`, changing nothing, if the number of instances differs.
     ///
+    /// Call it too, with the same instances, after a BLAS's bounds changed
+    /// ([`BvhWide::refit`](crate::layout::BvhWide::refit), or a new tree in its slot): the TLAS
+    /// keeps the world boxes it placed, and its walks cull whatever lies outside them (as in
+    /// Embree, where a changed BLAS scene needs the instancing scene committed again).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
+    /// # use strahl::glam::Affine3A;
+    /// # let mut tris = strahl::scene::icosphere(2).to_soup();
+    /// # let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// # let mut blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let one = [Instance::new(Affine3A::IDENTITY, 0)];
+    /// let mut tlas = Tlas::build(&one, &blases).unwrap();
+    /// // The BLAS's triangles move up by 5 and the BLAS is refitted: the TLAS still holds the old box.
+    /// for v in tris.iter_mut().flatten() {
+    ///     v.y += 5.0;
+    /// }
+    /// assert_eq!(blases[0].refit(&tris[..]), 0);
+    /// let ray = Ray::new(Vec3::new(0.0, 5.0, -3.0), Vec3::Z);
+    /// assert!(tlas.intersect::<Moller, _, 8>(&blases, &ray).is_none()); // culled by the old box
+    /// assert!(tlas.refit(&one, &blases));
+    /// assert!(tlas.intersect::<Moller, _, 8>(&blases, &ray).is_some());
+    /// ```
+    ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, Tlas}, traverse::Moller};
     /// use strahl::glam::Affine3A;
@@ -672,9 +696,10 @@ impl Tlas {
         blases: &[BvhWide<L, N>],
         threads: usize,
     ) -> bool {
+        let threads = threads.clamp(1, crate::build::MAX_THREADS);
         self.refit_with(instances, |placed, boxes, inverse| {
             let n = instances.len();
-            let chunk = n.div_ceil(threads.max(1) * 4).max(1024);
+            let chunk = n.div_ceil(threads * 4).max(1024);
             let ranges: Vec<(usize, usize)> = (0..n).step_by(chunk).map(|lo| (lo, (lo + chunk).min(n))).collect();
             let jobs: Vec<_> = ranges
                 .iter()

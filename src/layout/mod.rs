@@ -199,9 +199,10 @@ impl<L: Lane, const N: usize> WideNode<L, N> {
 ///
 /// Nothing is checked on construction (only that a node's lane type has `N` lanes, which
 /// [`WideNode::empty`] checks at compile time): traversal never panics and always terminates on
-/// any slices (codes out of range are skipped, a tree deeper than [`MAX_WIDE_DEPTH`] loses the nodes
-/// that do not fit on the stack). Trees from [`BvhWide::from_bvh2`] (and its parallel form) are
-/// always within bounds.
+/// any slices. Codes out of range are skipped; a walk that would overflow its stack (a tree deeper
+/// than [`MAX_WIDE_DEPTH`]) or visits more nodes than the view has (a cycle, a node with two
+/// parents) stops and answers from a scan of every pack instead, so the answer stays exact, only
+/// slow. Trees from [`BvhWide::from_bvh2`] (and its parallel form) are always within bounds.
 ///
 /// ```
 /// use strahl::{Aabb, Ray, Vec3, intersect::AabbX8, layout::{Bvh8Ref, Node8}, traverse::{Moller, wide}};

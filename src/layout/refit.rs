@@ -27,13 +27,18 @@ impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// large, beyond about `±1.7e38`, that its box's extent or `min + max` overflows), or that
     /// `tris` no longer has (an index past its end, or an indexed mesh whose vertex index is out
     /// of range), is **left out**: its lane is never hit and counts in no box; it comes back with
-    /// a later refit where it is valid again. Returns how many were left out. The rule is
+    /// a later refit where it is valid again. Returns how many references were left out: the
+    /// number of such triangles, except on trees with spatial splits
+    /// ([`Bvh2::build_spatial`](crate::build::Bvh2::build_spatial)), where a triangle counts once
+    /// for every leaf that holds a part of it. The rule is
     /// [`Bvh2::refit`](crate::build::Bvh2::refit)'s and the builders'. A degenerate (zero-area)
     /// but finite triangle counts in its leaf's box and is never hit, as after `from_bvh2`.
     /// Triangles that were invalid when the tree was built are not in it: rebuild to add them.
     ///
     /// Traversal after a refit gives exactly the closest hits of brute force over the tree's
-    /// triangles in their new places (`tests/refit.rs`).
+    /// triangles in their new places (`tests/refit.rs`). A [`Tlas`](crate::layout::Tlas) that
+    /// instances this tree keeps its old box until [`Tlas::refit`](crate::layout::Tlas::refit)
+    /// is called.
     ///
     /// ```
     /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::Bvh8, scene, traverse::Watertight};
