@@ -665,3 +665,50 @@ fn adaptive_batches_equal_single_rays() {
     check::<Watertight>(&none, &rays(&random_soup(10, 1), 30, 2), "empty tree");
     check::<Watertight>(&random_soup(10, 1), &[], "empty batch");
 }
+
+/// `BvhWide::build` / `build_par` (one call) make the two steps' tree, hits and statistics;
+/// bad parameters come back as the binary build's error, and an empty or all-invalid scene is an
+/// empty tree that nothing hits.
+#[test]
+fn one_call_builds_are_the_two_steps() {
+    let mut tris = random_soup(3000, 21);
+    tris[5] = [Vec3::NAN, Vec3::ONE, Vec3::ZERO]; // left out, counted
+    let rays = rays(&tris, 300, 22);
+    for params in [BuildParams::fastest(), BuildParams::default(), BuildParams::quality()] {
+        let (b2, want_stats) = Bvh2::build(&tris[..], &params).unwrap();
+        let two_step = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
+        let (one, stats) = Bvh8::build(&tris[..], &params).unwrap();
+        let (par, par_stats) = Bvh8::build_par(&tris[..], &params, 2).unwrap();
+        let (four, _) = Bvh4::build(&tris[..], &params).unwrap();
+        assert_eq!((stats.invalid, stats.primitives), (1, 2999)); // primitives in the tree
+        assert_eq!(
+            (stats.nodes, stats.leaves, stats.max_depth),
+            (want_stats.nodes, want_stats.leaves, want_stats.max_depth)
+        );
+        assert_eq!(par_stats.invalid, 1);
+        assert_eq!(
+            (one.nodes().len(), one.packs().len()),
+            (two_step.nodes().len(), two_step.packs().len())
+        );
+        for r in &rays {
+            let want = two_step.intersect::<Watertight>(r);
+            assert_eq!(one.intersect::<Watertight>(r), want);
+            same(par.intersect::<Watertight>(r), want, &tris, r, "build_par");
+            same(four.intersect::<Watertight>(r), want, &tris, r, "Bvh4::build");
+        }
+    }
+    let bad = BuildParams {
+        bins: 3,
+        ..BuildParams::default()
+    };
+    assert!(matches!(
+        Bvh8::build(&tris[..], &bad),
+        Err(strahl::layout::WideBuildError::Build(_))
+    ));
+    let ray = Ray::new(Vec3::new(0.1, 0.2, -5.0), Vec3::Z);
+    for scene in [Vec::new(), vec![[Vec3::NAN; 3]; 4]] {
+        let (b8, stats) = Bvh8::build(&scene[..], &BuildParams::default()).unwrap();
+        assert_eq!(stats.invalid as usize, scene.len());
+        assert!(b8.intersect::<Moller>(&ray).is_none() && !b8.occluded::<Moller>(&ray));
+    }
+}

@@ -45,6 +45,56 @@ impl core::fmt::Display for CollapseError {
 
 impl core::error::Error for CollapseError {}
 
+/// Why a one-call wide build ([`BvhWide::build`]) failed: the binary build's error or the
+/// collapse's.
+///
+/// ```
+/// use strahl::{build::{BuildError, BuildParams}, layout::{Bvh8, WideBuildError}};
+/// let tris = strahl::scene::icosphere(1).to_soup();
+/// let mut bad = BuildParams::default();
+/// bad.bins = 3; // out of range
+/// let err = Bvh8::build(&tris[..], &bad).unwrap_err();
+/// assert!(matches!(err, WideBuildError::Build(BuildError::InvalidParams(_))));
+/// assert!(err.to_string().starts_with("building the binary BVH: invalid build parameters"));
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WideBuildError {
+    /// The binary build refused (too many primitives, parameters out of range).
+    Build(crate::build::BuildError),
+    /// The collapse refused (a wide tree deeper than [`MAX_WIDE_DEPTH`], too many packs).
+    Collapse(CollapseError),
+}
+
+impl core::fmt::Display for WideBuildError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Build(e) => write!(f, "building the binary BVH: {e}"),
+            Self::Collapse(e) => write!(f, "collapsing to the wide BVH: {e}"),
+        }
+    }
+}
+
+impl core::error::Error for WideBuildError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Build(e) => Some(e),
+            Self::Collapse(e) => Some(e),
+        }
+    }
+}
+
+impl From<crate::build::BuildError> for WideBuildError {
+    fn from(e: crate::build::BuildError) -> Self {
+        Self::Build(e)
+    }
+}
+
+impl From<CollapseError> for WideBuildError {
+    fn from(e: CollapseError) -> Self {
+        Self::Collapse(e)
+    }
+}
+
 /// Memory for repeated collapses: the subtree counts and the cost-optimal collapse's table, kept
 /// between calls, as [`build::Builder`](crate::build::Builder) keeps the binary builders'. With
 /// [`collapse_into`](Self::collapse_into) the wide tree's own arrays are reused too, so an engine
@@ -1102,6 +1152,55 @@ fn counts_in_index_order(bvh: &Bvh2, counts: &mut [u32]) -> bool {
 }
 
 impl<L: Lane, const N: usize> BvhWide<L, N> {
+    /// Builds an `N`-wide BVH over `tris` in one call: the binary tree with `params`
+    /// ([`Bvh2::build`]), then the cost-optimal collapse ([`from_bvh2`](Self::from_bvh2)); the
+    /// binary tree is dropped. The build's statistics (triangles left out, depth, leaves) come
+    /// with it. To keep the binary tree, refit it, or reuse memory across rebuilds, call the two
+    /// steps ([`Builder`](crate::build::Builder), [`Collapser`]).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::BuildParams, layout::Bvh8, traverse::Watertight};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (bvh8, stats) = Bvh8::build(&tris[..], &BuildParams::default()).unwrap();
+    /// assert_eq!(stats.invalid, 0);
+    /// let hit = bvh8.intersect::<Watertight>(&Ray::new(Vec3::new(0.1, 0.2, -5.0), Vec3::Z)).unwrap();
+    /// assert!((hit.t - 4.0).abs() < 0.05);
+    /// ```
+    pub fn build<P: Triangles + ?Sized>(
+        tris: &P,
+        params: &crate::build::BuildParams,
+    ) -> Result<(Self, crate::build::BuildStats), WideBuildError> {
+        let (bvh, stats) = Bvh2::build(tris, params)?;
+        Ok((Self::from_bvh2(&bvh, tris)?, stats))
+    }
+
+    /// [`build`](Self::build) on up to `threads` threads (`std`): [`Bvh2::build_par`], then
+    /// [`from_bvh2_par`](Self::from_bvh2_par); the same tree as `build` for the builders whose
+    /// parallel form builds the sequential tree (see
+    /// [`Builder::build_into_par`](crate::build::Builder::build_into_par)).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::BuildParams, layout::Bvh8, traverse::Moller};
+    /// let tris = strahl::scene::thin_soup(20_000, 1);
+    /// let (one, _) = Bvh8::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let (two, _) = Bvh8::build_par(&tris[..], &BuildParams::default(), 2).unwrap();
+    /// assert_eq!((one.nodes().len(), one.packs().len()), (two.nodes().len(), two.packs().len()));
+    /// let ray = Ray::new(Vec3::splat(-1.0), Vec3::ONE);
+    /// assert_eq!(one.intersect::<Moller>(&ray), two.intersect::<Moller>(&ray));
+    /// ```
+    #[cfg(feature = "std")]
+    pub fn build_par<P: Triangles + Sync + ?Sized>(
+        tris: &P,
+        params: &crate::build::BuildParams,
+        threads: usize,
+    ) -> Result<(Self, crate::build::BuildStats), WideBuildError>
+    where
+        L: Send + Sync,
+    {
+        let (bvh, stats) = Bvh2::build_par(tris, params, threads)?;
+        Ok((Self::from_bvh2_par(&bvh, tris, threads)?, stats))
+    }
+
     /// Collapses `bvh` (built over `tris`) into an `N`-wide BVH with packed leaves.
     ///
     /// ```

@@ -65,7 +65,7 @@ use alloc::vec::Vec;
 
 pub use bytes::{FormatError, HEADER_BYTES};
 #[cfg(feature = "alloc")]
-pub use collapse::{CollapseError, Collapser};
+pub use collapse::{CollapseError, Collapser, WideBuildError};
 #[cfg(feature = "alloc")]
 pub use instance::{Instance, InstanceHit, Tlas};
 
