@@ -573,6 +573,7 @@ fn masks_hide_instances_as_brute_force_over_the_visible_ones() {
         .iter()
         .map(|ray| reference::<Moller>(&meshes, &inst, ray))
         .collect();
+    let mut cut_changed = 0;
     for ray_mask in [u32::MAX, 0b001, 0b010, 0b100, 0b110, 0] {
         let mut hidden = 0;
         let sees = |h: &InstanceHit| inst[h.instance as usize].mask & ray_mask != 0;
@@ -598,12 +599,33 @@ fn masks_hide_instances_as_brute_force_over_the_visible_ones() {
                 assert_eq!(tlas8.intersect::<Moller, _, 8>(&b8, ray), got8);
                 assert_eq!(tlas8.occluded::<Moller, _, 8>(&b8, ray), want.is_some());
             }
+            // A mask and a filter at once (even primitives of even instances cut out): brute
+            // force over the hits that are both visible and accepted (two of the ray masks).
+            if ray_mask == u32::MAX || ray_mask == 0b010 {
+                let cut = |h: &InstanceHit| (h.instance | h.hit.prim) % 2 == 1;
+                let both = |h: &InstanceHit| sees(h) && cut(h);
+                let want_both = reference_filtered::<Moller>(&meshes, &inst, None, ray, &both);
+                let got_both = tlas8.intersect_masked_filtered::<Moller, _, 8>(&b8, ray, ray_mask, cut);
+                same_filtered::<Moller>(got_both, want_both, &meshes, &inst, ray, &what, &both);
+                let got_both4 = tlas4.intersect_masked_filtered::<Moller, _, 4>(&b4, ray, ray_mask, cut);
+                same_filtered::<Moller>(got_both4, want_both, &meshes, &inst, ray, &what, &both);
+                assert_eq!(
+                    tlas8.occluded_masked_filtered::<Moller, _, 8>(&b8, ray, ray_mask, cut),
+                    want_both.is_some(),
+                    "{what}"
+                );
+                cut_changed += usize::from(want_both != want);
+            }
             hidden += usize::from(all.is_some() && all != want);
         }
         // Every ray mask changed answers (the instances of mask 0 for all ones), or the
         // comparison says little.
         assert!(hidden > 50, "ray mask {ray_mask:#b} changed {hidden} answers");
     }
+    assert!(
+        cut_changed > 40,
+        "the filter changed only {cut_changed} masked answers"
+    );
     // `set_mask`: every instance's mask changed in place answers as a fresh build.
     let mut changed = tlas8.clone();
     let mut rebuilt = inst.clone();

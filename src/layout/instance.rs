@@ -988,6 +988,69 @@ impl Tlas {
             .is_some()
     }
 
+    /// [`intersect_masked`](Self::intersect_masked) and
+    /// [`intersect_filtered`](Self::intersect_filtered) at once: the nearest hit that `filter`
+    /// accepts among the instances whose mask shares a bit with `ray_mask` (hidden subtrees are
+    /// skipped whole; the filter sees only hits in visible instances), as Embree's rays carry a
+    /// mask and meet filter functions in one call.
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, InstanceHit, Tlas}, traverse::Moller};
+    /// use strahl::glam::Affine3A;
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let at = |z: f32, mask: u32| Instance::new(Affine3A::from_translation(Vec3::new(0.0, 0.0, z)), 0).with_mask(mask);
+    /// let tlas = Tlas::build(&[at(5.0, 0b10), at(10.0, 0b01), at(15.0, 0b01)], &blases).unwrap();
+    /// let ray = Ray::new(Vec3::new(0.1, 0.2, 0.0), Vec3::Z);
+    /// // Mask 0b01 hides instance 0; the filter rejects the front faces of instance 1
+    /// // (entered at t ~ 9), so the ray meets its back (t ~ 11).
+    /// let back = |h: &InstanceHit| h.instance != 1 || h.hit.t > 10.0;
+    /// let hit = tlas.intersect_masked_filtered::<Moller, _, 8>(&blases, &ray, 0b01, back).unwrap();
+    /// assert_eq!(hit.instance, 1);
+    /// assert!(hit.hit.t > 10.9 && hit.hit.t < 11.1);
+    /// assert!(!tlas.occluded_masked_filtered::<Moller, _, 8>(&blases, &ray, 0b01, |h: &InstanceHit| h.instance == 0));
+    /// ```
+    pub fn intersect_masked_filtered<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        ray: &Ray,
+        ray_mask: u32,
+        mut filter: impl HitFilter<InstanceHit>,
+    ) -> Option<InstanceHit> {
+        self.walk::<T, L, N, _, false, true>(blases, ray, ray_mask, &mut filter)
+    }
+
+    /// [`occluded_masked`](Self::occluded_masked) and
+    /// [`occluded_filtered`](Self::occluded_filtered) at once (see
+    /// [`intersect_masked_filtered`](Self::intersect_masked_filtered)).
+    ///
+    /// ```
+    /// use strahl::{Ray, Vec3, build::{Bvh2, BuildParams}, layout::{Bvh8, Instance, InstanceHit, Tlas}, traverse::Moller};
+    /// let tris = strahl::scene::icosphere(2).to_soup();
+    /// let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
+    /// let blases = [Bvh8::from_bvh2(&b2, &tris[..]).unwrap()];
+    /// let leaves = Instance::new(strahl::glam::Affine3A::IDENTITY, 0).with_mask(0b01);
+    /// let tlas = Tlas::build(&[leaves], &blases).unwrap();
+    /// let shadow = Ray::with_range(Vec3::new(0.1, 0.2, -3.0), Vec3::Z, 0.0, 10.0);
+    /// let opaque = |h: &InstanceHit| h.hit.u < 0.5; // an alpha test
+    /// assert_eq!(
+    ///     tlas.occluded_masked_filtered::<Moller, _, 8>(&blases, &shadow, 0b01, opaque),
+    ///     tlas.occluded_filtered::<Moller, _, 8>(&blases, &shadow, opaque),
+    /// );
+    /// assert!(!tlas.occluded_masked_filtered::<Moller, _, 8>(&blases, &shadow, 0b10, opaque));
+    /// ```
+    pub fn occluded_masked_filtered<T: TriangleTest, L: Lane, const N: usize>(
+        &self,
+        blases: &[BvhWide<L, N>],
+        ray: &Ray,
+        ray_mask: u32,
+        mut filter: impl HitFilter<InstanceHit>,
+    ) -> bool {
+        self.walk::<T, L, N, _, true, true>(blases, ray, ray_mask, &mut filter)
+            .is_some()
+    }
+
     /// [`intersect`](Self::intersect) for every ray of a batch: `hits[i]` for `rays[i]` (the
     /// shorter length wins). Groups of 8 consecutive rays with the same direction signs and
     /// origins close together (a camera tile, as [`wide::intersect_batch`] decides) go as one
