@@ -622,10 +622,7 @@ fn masks_hide_instances_as_brute_force_over_the_visible_ones() {
         // comparison says little.
         assert!(hidden > 50, "ray mask {ray_mask:#b} changed {hidden} answers");
     }
-    assert!(
-        cut_changed > 40,
-        "the filter changed only {cut_changed} masked answers"
-    );
+    assert!(cut_changed > 40, "the filter changed only {cut_changed} masked answers");
     // `set_mask`: every instance's mask changed in place answers as a fresh build.
     let mut changed = tlas8.clone();
     let mut rebuilt = inst.clone();

@@ -712,3 +712,39 @@ fn one_call_builds_are_the_two_steps() {
         assert!(b8.intersect::<Moller>(&ray).is_none() && !b8.occluded::<Moller>(&ray));
     }
 }
+
+/// A `StridedMesh` over interleaved vertices (position after one padding byte, then 20 bytes
+/// of other attributes: a 36-byte stride, unaligned) gives the very triangles, trees and hits
+/// of the `IndexedMesh` over the same positions; indices past the last vertex are left out.
+#[test]
+fn strided_meshes_trace_as_indexed_meshes() {
+    use strahl::geometry::{IndexedMesh, StridedMesh, Triangles};
+    let bunny = scene::bunny();
+    let mut indices = bunny.indices.clone();
+    indices[7][2] = bunny.positions.len() as u32; // one past the last vertex
+    indices[9][0] = u32::MAX;
+    let stride = 36;
+    let mut bytes = vec![0xAAu8; 1 + stride * bunny.positions.len()];
+    for (i, p) in bunny.positions.iter().enumerate() {
+        let at = 1 + i * stride;
+        bytes[at..at + 12].copy_from_slice(bytemuck::cast_slice(&p.to_array()));
+    }
+    let strided = StridedMesh::new(&bytes[1..], stride, &indices).unwrap();
+    let indexed = IndexedMesh::new(&bunny.positions, &indices);
+    assert_eq!(
+        (strided.len(), strided.vertices()),
+        (indexed.len(), bunny.positions.len())
+    );
+    for i in 0..indexed.len() + 2 {
+        assert_eq!(strided.triangle(i), indexed.triangle(i), "triangle {i}");
+    }
+    let (a, sa) = Bvh8::build(&strided, &BuildParams::default()).unwrap();
+    let (b, sb) = Bvh8::build(&indexed, &BuildParams::default()).unwrap();
+    assert_eq!((sa.invalid, sb.invalid), (2, 2));
+    assert_eq!((a.nodes().len(), a.packs().len()), (b.nodes().len(), b.packs().len()));
+    let soup: Vec<Triangle> = (0..indexed.len()).filter_map(|i| indexed.triangle(i)).collect();
+    for r in &rays(&soup, 500, 31) {
+        assert_eq!(a.intersect::<Watertight>(r), b.intersect::<Watertight>(r));
+        assert_eq!(a.occluded::<Moller>(r), b.occluded::<Moller>(r));
+    }
+}

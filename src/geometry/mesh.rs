@@ -63,6 +63,15 @@ pub enum GeometryError {
         /// Which buffer.
         what: &'static str,
     },
+    /// A stride shorter than the element it steps over ([`StridedMesh`]).
+    BadStride {
+        /// Which buffer.
+        what: &'static str,
+        /// The stride in bytes.
+        stride: usize,
+        /// The element size it must be at least.
+        element: usize,
+    },
 }
 
 impl core::fmt::Display for GeometryError {
@@ -72,6 +81,12 @@ impl core::fmt::Display for GeometryError {
                 write!(f, "{what}: {len} bytes is not a multiple of the {element}-byte element")
             }
             Self::Misaligned { what } => write!(f, "{what}: buffer is not 4-byte aligned"),
+            Self::BadStride { what, stride, element } => {
+                write!(
+                    f,
+                    "{what}: a stride of {stride} bytes is shorter than the {element}-byte element"
+                )
+            }
         }
     }
 }
@@ -240,6 +255,134 @@ impl Triangles for IndexedMesh<'_> {
         let [a, b, c] = *self.indices.get(i)?;
         let p = self.positions;
         Some([*p.get(a as usize)?, *p.get(b as usize)?, *p.get(c as usize)?])
+    }
+    /// The index triple (its vertices are only known once it has arrived).
+    #[inline]
+    fn prefetch(&self, i: usize) {
+        if let Some(t) = self.indices.get(i) {
+            crate::math::prefetch(t);
+        }
+    }
+}
+
+/// Triangles over interleaved vertex data, borrowed without copying: each vertex is `stride`
+/// bytes with its position as three `f32`s (native endian) at its start, the rest (normals,
+/// texture coordinates) skipped, as Embree's vertex buffers with a byte stride; the indices are
+/// `u32` triples. Pass the buffer from the position's byte offset (`&bytes[offset..]`); it needs
+/// no alignment, and the last vertex needs only its 12 position bytes. An index past the last
+/// vertex makes that triangle `None` (left out of trees), never a panic.
+///
+/// ```
+/// use strahl::{Vec3, build::BuildParams, layout::Bvh8, Ray, traverse::Watertight};
+/// use strahl::geometry::{GeometryError, StridedMesh, Triangles};
+/// // Vertices of position, normal and texture coordinates: 32 bytes each.
+/// #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+/// #[repr(C)]
+/// struct Vertex { pos: [f32; 3], normal: [f32; 3], uv: [f32; 2] }
+/// let v = |x: f32, y: f32| Vertex { pos: [x, y, 2.0], normal: [0.0, 0.0, -1.0], uv: [x, y] };
+/// let vertices = [v(-1.0, -1.0), v(1.0, -1.0), v(1.0, 1.0), v(-1.0, 1.0)];
+/// let bytes: &[u8] = bytemuck::cast_slice(&vertices);
+/// let mesh = StridedMesh::new(bytes, 32, &[[0, 1, 2], [0, 2, 3], [0, 1, 4]]).unwrap();
+/// assert_eq!(mesh.vertices(), 4);
+/// assert_eq!(mesh.triangle(1), Some([Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, 1.0, 2.0), Vec3::new(-1.0, 1.0, 2.0)]));
+/// assert_eq!(mesh.triangle(2), None); // there is no vertex 4
+/// let (bvh8, stats) = Bvh8::build(&mesh, &BuildParams::default()).unwrap();
+/// assert_eq!(stats.invalid, 1);
+/// assert_eq!(bvh8.intersect::<Watertight>(&Ray::new(Vec3::new(-0.5, 0.5, 0.0), Vec3::Z)).unwrap().prim, 1);
+/// // The texture coordinates as positions (byte offset 24 of a vertex) would need 12 bytes:
+/// // the last vertex has only 8 there, so it is not a vertex.
+/// assert_eq!(StridedMesh::new(&bytes[24..], 32, &[]).unwrap().vertices(), 3);
+/// let err = StridedMesh::new(bytes, 8, &[]).unwrap_err();
+/// assert_eq!(err, GeometryError::BadStride { what: "vertices", stride: 8, element: 12 });
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct StridedMesh<'a> {
+    vertices: &'a [u8],
+    stride: usize,
+    count: usize,
+    /// Three vertex indices per triangle.
+    pub indices: &'a [[u32; 3]],
+}
+
+impl<'a> StridedMesh<'a> {
+    /// Borrows a vertex buffer of `stride`-byte vertices (a position's three `f32`s at the start
+    /// of each) and the index triples. A stride under 12 bytes is an error; any length and
+    /// alignment of `vertices` is valid (the vertices are its whole strides, and a last one of at
+    /// least 12 bytes).
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::{StridedMesh, Triangles}};
+    /// // Packed positions are a stride of 12.
+    /// let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    /// let mesh = StridedMesh::new(bytemuck::cast_slice(&positions), 12, &[[0, 1, 2]]).unwrap();
+    /// assert_eq!(mesh.triangle(0), Some(positions));
+    /// assert_eq!(StridedMesh::new(&[], 16, &[[0, 1, 2]]).unwrap().triangle(0), None); // no vertices
+    /// ```
+    pub fn new(vertices: &'a [u8], stride: usize, indices: &'a [[u32; 3]]) -> Result<Self, GeometryError> {
+        const POSITION: usize = 12;
+        if stride < POSITION {
+            return Err(GeometryError::BadStride {
+                what: "vertices",
+                stride,
+                element: POSITION,
+            });
+        }
+        let count = match vertices.len().checked_sub(POSITION) {
+            Some(rest) => rest / stride + 1,
+            None => 0,
+        };
+        Ok(Self {
+            vertices,
+            stride,
+            count,
+            indices,
+        })
+    }
+
+    /// The number of vertices in the buffer.
+    ///
+    /// ```
+    /// use strahl::geometry::StridedMesh;
+    /// let bytes = [0u8; 100];
+    /// assert_eq!(StridedMesh::new(&bytes, 32, &[]).unwrap().vertices(), 3); // at 0, 32, 64 (88 < 100 < 108)
+    /// ```
+    pub fn vertices(&self) -> usize {
+        self.count
+    }
+
+    /// The position of vertex `i`, or `None` past the last one.
+    ///
+    /// ```
+    /// use strahl::{Vec3, geometry::StridedMesh};
+    /// let data = [1.0f32, 2.0, 3.0, 9.0, 4.0, 5.0, 6.0]; // two vertices of 16 bytes (the last cut short)
+    /// let mesh = StridedMesh::new(bytemuck::cast_slice(&data), 16, &[]).unwrap();
+    /// assert_eq!((mesh.vertex(0), mesh.vertex(1), mesh.vertex(2)), (Some(Vec3::new(1.0, 2.0, 3.0)), Some(Vec3::new(4.0, 5.0, 6.0)), None));
+    /// ```
+    #[inline]
+    pub fn vertex(&self, i: usize) -> Option<Vec3> {
+        if i >= self.count {
+            return None;
+        }
+        // `i < count`, so `i * stride + 12 <= len` (no overflow: it is within the slice).
+        let at = i * self.stride;
+        let b = self.vertices.get(at..at + 12)?;
+        Some(Vec3::from_array(bytemuck::pod_read_unaligned::<[f32; 3]>(b)))
+    }
+}
+
+impl Triangles for StridedMesh<'_> {
+    #[inline]
+    fn len(&self) -> usize {
+        self.indices.len()
+    }
+    #[inline]
+    fn triangle(&self, i: usize) -> Option<Triangle> {
+        let [a, b, c] = *self.indices.get(i)?;
+        Some([
+            self.vertex(a as usize)?,
+            self.vertex(b as usize)?,
+            self.vertex(c as usize)?,
+        ])
     }
     /// The index triple (its vertices are only known once it has arrived).
     #[inline]

@@ -1,4 +1,4 @@
-//! Geometry types: [`Aabb`], [`Ray`], [`Hit`], triangle input ([`IndexedMesh`], [`TriangleSoup`])
+//! Geometry types: [`Aabb`], [`Ray`], [`Hit`], triangle input ([`IndexedMesh`], [`TriangleSoup`], [`StridedMesh`])
 //! and Morton codes ([`morton`]).
 //!
 //! All plain-data types are `#[repr(C)]` and [`bytemuck::Pod`], so they can be read zero-copy from
@@ -11,5 +11,5 @@ pub mod offset;
 mod ray;
 
 pub use aabb::Aabb;
-pub use mesh::{GeometryError, IndexedMesh, Triangle, TriangleSoup, Triangles, is_degenerate};
+pub use mesh::{GeometryError, IndexedMesh, StridedMesh, Triangle, TriangleSoup, Triangles, is_degenerate};
 pub use ray::{Hit, INVALID, Ray};
