@@ -11,7 +11,9 @@
 //!
 //! Members: `bvh8_single` (the reference), `packetK_bvh2`, `packetK_bvh8` (pure packets, switch 0),
 //! `hybridK_bvh8` (the default switch, [`packet::default_switch`]) and, for diffuse rays,
-//! `hybridK_bvh8_half` (switch K / 2: some packet traversal near the root).
+//! `hybridK_bvh8_half` (switch K / 2: some packet traversal near the root); with a hit filter
+//! that accepts every hit, `bvh8_single_filter_all` and `hybrid8_bvh8_filter_all`
+//! ([`packet::intersect_packet_filtered`]).
 //!
 //! `cargo bench --bench packet -- --noplot` (add `--features embree` for Embree).
 
@@ -63,6 +65,27 @@ fn packets_bvh8(k: usize, switch: u32) -> Run {
     })
 }
 
+/// Single rays through the filtered walk, with a filter that accepts every hit: what a hit filter
+/// costs where it rejects nothing.
+fn single_bvh8_filter_all() -> Run {
+    Box::new(|c, rays, _| {
+        rays.iter()
+            .filter(|r| c.bvh8.intersect_filtered::<Moller>(r, |_: &Hit| true).is_some())
+            .count()
+    })
+}
+
+/// Packets of 8 through the filtered packet walk (`intersect_packet_filtered`), accepting every
+/// hit: leaves lane by lane with the filtered single-ray kernels.
+fn packets8_bvh8_filter_all(switch: u32) -> Run {
+    Box::new(move |c, rays, hits| {
+        for (r, h) in rays.chunks(8).zip(hits.chunks_mut(8)) {
+            packet::intersect_packet_filtered::<Moller, _, 8, f32x8, 8>(c.bvh8.view(), r, h, switch, |_: &Hit| true);
+        }
+        count(&hits[..rays.len()])
+    })
+}
+
 fn packets_bvh2(k: usize) -> Run {
     Box::new(move |c, rays, hits| {
         let (v, t) = (c.bvh2.view(), &c.tris[..]);
@@ -96,7 +119,15 @@ fn bench_scene(cr: &mut Criterion, name: &str, tris: Vec<Triangle>) {
         };
         let rays: [Vec<Ray>; 3] = [rays_for(4), rays_for(8), rays_for(16)];
         let by_k = |k: usize| &rays[k.trailing_zeros() as usize - 2];
-        let mut members: Vec<(String, usize, Run)> = vec![("bvh8_single".into(), 8, single_bvh8())];
+        let mut members: Vec<(String, usize, Run)> = vec![
+            ("bvh8_single".into(), 8, single_bvh8()),
+            ("bvh8_single_filter_all".into(), 8, single_bvh8_filter_all()),
+            (
+                "hybrid8_bvh8_filter_all".into(),
+                8,
+                packets8_bvh8_filter_all(packet::DEFAULT_SWITCH),
+            ),
+        ];
         for k in [4, 8, 16] {
             members.push((format!("packet{k}_bvh2"), k, packets_bvh2(k)));
             members.push((format!("packet{k}_bvh8"), k, packets_bvh8(k, 0)));

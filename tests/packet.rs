@@ -179,6 +179,93 @@ fn bunny() {
     check_scene::<Moller>("bunny", &s, 200, 16, 16);
 }
 
+/// A hit filter under test (a function of the hit).
+type Filter = fn(&Hit) -> bool;
+
+/// Filtered packets (`intersect_packet_filtered`, `occluded_packet_filtered`) of `K` rays over
+/// BVH4 and BVH8 give every lane the filtered single ray's answer, for several hybrid thresholds;
+/// returns how many answers the filter changed.
+fn check_filtered_k<T: TriangleTest, R: Lane, const K: usize>(s: &Scene, rays: &[Ray], f: Filter, what: &str) -> usize {
+    let tris = &s.tris[..];
+    let mut changed = 0;
+    for (k, chunk) in rays.chunks(K).enumerate() {
+        let len = if k % 7 == 3 {
+            (K / 2).min(chunk.len())
+        } else {
+            chunk.len()
+        };
+        let chunk = &chunk[..len];
+        let want: Vec<Option<Hit>> = chunk.iter().map(|r| s.b8.intersect_filtered::<T>(r, f)).collect();
+        let any: Vec<bool> = chunk.iter().map(|r| s.b8.occluded_filtered::<T>(r, f)).collect();
+        for (r, w) in chunk.iter().zip(&want) {
+            changed += usize::from(*w != s.b8.intersect::<T>(r));
+            assert!(w.is_none_or(|h| f(&h)), "{what}: single ray returned a rejected hit");
+        }
+        for switch in [0, 3, packet::default_switch(K)] {
+            let (mut h8, mut h4) = ([UNTOUCHED; K], [UNTOUCHED; K]);
+            packet::intersect_packet_filtered::<T, _, 8, R, K>(s.b8.view(), chunk, &mut h8, switch, f);
+            packet::intersect_packet_filtered::<T, _, 4, R, K>(s.b4.view(), chunk, &mut h4, switch, f);
+            for (i, r) in chunk.iter().enumerate() {
+                same(
+                    h8[i],
+                    want[i],
+                    tris,
+                    r,
+                    &format!("{what}: packet{K}/bvh8 switch {switch} lane {i}"),
+                );
+                same(
+                    h4[i],
+                    want[i],
+                    tris,
+                    r,
+                    &format!("{what}: packet{K}/bvh4 switch {switch} lane {i}"),
+                );
+            }
+            assert!(
+                h8[len..].iter().chain(&h4[len..]).all(|h| *h == UNTOUCHED),
+                "{what}: lanes past the slice"
+            );
+            let (mut o8, mut o4) = ([false; K], [false; K]);
+            packet::occluded_packet_filtered::<T, _, 8, R, K>(s.b8.view(), chunk, &mut o8, switch, f);
+            packet::occluded_packet_filtered::<T, _, 4, R, K>(s.b4.view(), chunk, &mut o4, switch, f);
+            assert_eq!(&o8[..len], &any[..], "{what}: occluded{K}/bvh8 switch {switch}");
+            assert_eq!(&o4[..len], &any[..], "{what}: occluded{K}/bvh4 switch {switch}");
+        }
+    }
+    changed
+}
+
+#[test]
+fn filtered_packets_equal_filtered_single_rays() {
+    let filters: [(&str, Filter); 4] = [
+        ("even primitives", |h| h.prim % 2 == 0),
+        ("alpha stripes in u", |h| (h.u * 7.0).fract() < 0.5),
+        ("none", |_| false),
+        ("all, as a closure", |_| true),
+    ];
+    for (name, s) in [
+        ("bunny", scene_of(scene::bunny().to_soup())),
+        ("clustered", scene_of(scene::clustered_soup(3000, 5, 2))),
+    ] {
+        let mixed = mixed_rays(&s.tris, 240, 31);
+        let cam8 = camera_rays(&s.tris, TileShape::X4_2, 24, 16);
+        let cam16 = camera_rays(&s.tris, TileShape::X4_4, 24, 16);
+        for (fname, f) in filters {
+            let what = format!("{name} / {fname}");
+            let mut changed = check_filtered_k::<Watertight, f32x8, 8>(&s, &cam8, f, &format!("{what} 4x2"));
+            changed += check_filtered_k::<Moller, f32x8, 8>(&s, &mixed, f, &format!("{what} mixed"));
+            changed += check_filtered_k::<Watertight, f32x16, 16>(&s, &cam16, f, &format!("{what} 4x4"));
+            changed += check_filtered_k::<Watertight, f32x4, 4>(&s, &mixed, f, &format!("{what} mixed"));
+            // The filters change answers (all but the one that accepts everything).
+            assert_eq!(
+                changed == 0,
+                fname.starts_with("all"),
+                "{what}: {changed} answers changed"
+            );
+        }
+    }
+}
+
 #[test]
 fn empty_scene_and_empty_slices() {
     let s = scene_of(Vec::new());

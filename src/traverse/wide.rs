@@ -656,22 +656,12 @@ pub(crate) fn occluded_prepared_filtered<T: TriangleTest, L: Lane, const N: usiz
     occluded_from_filtered::<T, L, N, F>(bvh, 0, r, f)
 }
 
-/// [`occluded_prepared`] in the subtree below child code `start` (`0`: the whole tree), for the
-/// packets' single rays, which leave the packet below the root (the packets pass their
-/// conservative `T`, so the box test is theirs).
+/// The any-hit walk from child code `start` (`0`: the whole tree) counting the hits `f` accepts;
+/// an empty ray, or an empty tree walked from its root, answers `false`. The packets' single rays,
+/// which leave the packet below the root, walk this way (with the packets' conservative `T`, so
+/// the box test is theirs).
 #[inline]
-pub(crate) fn occluded_prepared_from<T: TriangleTest, L: Lane, const N: usize>(
-    bvh: BvhWideRef<'_, L, N>,
-    start: u32,
-    r: &PreparedRay,
-) -> bool {
-    occluded_from_filtered::<T, L, N, _>(bvh, start, r, &mut AcceptAll)
-}
-
-/// The any-hit walk from child code `start` counting the hits `f` accepts; an empty ray, or an
-/// empty tree walked from its root, answers `false`.
-#[inline]
-fn occluded_from_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+pub(crate) fn occluded_from_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
     bvh: BvhWideRef<'_, L, N>,
     start: u32,
     r: &PreparedRay,
@@ -1116,7 +1106,7 @@ fn gather_ordered(rays: &[Ray], order: &[u32], n: usize, mut chunk: impl FnMut(&
 
 /// `true` if `r` hits a triangle of `pack` that `f` accepts.
 #[inline(always)]
-fn any_in_pack<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+pub(crate) fn any_in_pack<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
     r: &PreparedRay,
     pack: &TriangleLanes<L, N>,
     f: &mut F,
@@ -1581,7 +1571,7 @@ mod tests {
     #[test]
     #[cfg(feature = "alloc")]
     fn walks_from_a_child() {
-        use super::{occluded_prepared, occluded_prepared_from};
+        use super::{AcceptAll, occluded_from_filtered, occluded_prepared};
         use crate::build::{BuildParams, Bvh2};
         use crate::intersect::PreparedRay;
         use crate::layout::{Bvh8, BvhWideRef, EMPTY_CHILD, LEAF_BIT};
@@ -1603,8 +1593,18 @@ mod tests {
             packs: one.packs(),
         };
         assert!(!occluded_prepared::<Moller, _, 8>(no_nodes, &r));
-        assert!(!occluded_prepared_from::<Moller, _, 8>(no_nodes, 0, &r));
-        assert!(occluded_prepared_from::<Moller, _, 8>(no_nodes, LEAF_BIT, &r)); // pack 0 itself
+        assert!(!occluded_from_filtered::<Moller, _, 8, _>(
+            no_nodes,
+            0,
+            &r,
+            &mut AcceptAll
+        ));
+        assert!(occluded_from_filtered::<Moller, _, 8, _>(
+            no_nodes,
+            LEAF_BIT,
+            &r,
+            &mut AcceptAll
+        )); // pack 0 itself
         // Two far-apart groups of triangles: the ray hits the first only.
         let tris: alloc::vec::Vec<_> = (0..40)
             .map(|i| tri(if i < 20 { 0.0 } else { 100.0 } + 0.01 * i as f32))
@@ -1612,10 +1612,15 @@ mod tests {
         let (b2, _) = Bvh2::build(&tris[..], &BuildParams::default()).unwrap();
         let b8 = Bvh8::from_bvh2(&b2, &tris[..]).unwrap();
         assert!(occluded_prepared::<Moller, _, 8>(b8.view(), &r));
-        assert!(occluded_prepared_from::<Moller, _, 8>(b8.view(), 0, &r));
+        assert!(occluded_from_filtered::<Moller, _, 8, _>(
+            b8.view(),
+            0,
+            &r,
+            &mut AcceptAll
+        ));
         let kids = b8.nodes()[0].child.iter().filter(|&&c| c != EMPTY_CHILD);
         let from_kids: alloc::vec::Vec<bool> = kids
-            .map(|&c| occluded_prepared_from::<Moller, _, 8>(b8.view(), c, &r))
+            .map(|&c| occluded_from_filtered::<Moller, _, 8, _>(b8.view(), c, &r, &mut AcceptAll))
             .collect();
         assert!(
             from_kids.len() >= 2 && from_kids.contains(&true) && from_kids.contains(&false),

@@ -8,7 +8,8 @@
 use crate::geometry::{Hit, Triangle};
 use crate::intersect::{HitLanes, PreparedPacket, PreparedPacket8, PreparedRay, TriangleLanes};
 use crate::math::{Lane, f32x8};
-use crate::traverse::TriangleTest;
+use crate::traverse::wide::any_in_pack;
+use crate::traverse::{HitFilter, TriangleTest, closest_in_pack};
 
 /// One 8-lane half of a 16-ray packet.
 struct Half {
@@ -131,19 +132,20 @@ impl<R: Lane, const K: usize> Leaves<R, K> {
     }
 }
 
-/// Closest hits of the lanes of `mask` in `packs`, ray by ray with the single-ray x`N` kernel (the
-/// very test single-ray traversal runs, so the answers are the same bit for bit): each lane's
-/// `tmax` shrinks to its hit and the hit goes to `best`. Returns the lanes hit.
+/// Closest hits of the lanes of `mask` in `packs` that `f` accepts, ray by ray with the single-ray
+/// x`N` kernel (the very test single-ray traversal runs, so the answers are the same bit for bit):
+/// each lane's `tmax` shrinks to its hit and the hit goes to `best`. Returns the lanes hit.
 ///
 /// PERF: a pack of 8 triangles costs one x8 kernel per ray here, against 8 packet kernels (each
 /// extracting and splatting one triangle) in [`Leaves::test`]: cheaper unless most lanes of a wide
 /// packet enter the leaf.
 #[inline(always)]
-pub(super) fn closest_rays<T: TriangleTest, L: Lane, const N: usize, const K: usize>(
+pub(super) fn closest_rays<T: TriangleTest, L: Lane, const N: usize, const K: usize, F: HitFilter>(
     packs: &[TriangleLanes<L, N>],
     single: &mut [PreparedRay; K],
     best: &mut [Option<Hit>; K],
     mask: u32,
+    f: &mut F,
 ) -> u32 {
     let mut hit = 0;
     let mut m = mask;
@@ -154,7 +156,7 @@ pub(super) fn closest_rays<T: TriangleTest, L: Lane, const N: usize, const K: us
             continue;
         };
         for pack in packs {
-            if let Some(h) = T::intersect_lanes(r, pack) {
+            if let Some(h) = closest_in_pack::<T, L, N, F>(r, pack, f) {
                 r.tmax = h.t;
                 *b = Some(h);
                 hit |= 1 << i;
@@ -164,12 +166,14 @@ pub(super) fn closest_rays<T: TriangleTest, L: Lane, const N: usize, const K: us
     hit
 }
 
-/// Any-hit form of [`closest_rays`]: the lanes of `mask` that hit some triangle of `packs`.
+/// Any-hit form of [`closest_rays`]: the lanes of `mask` that hit some triangle of `packs` with a
+/// hit `f` accepts.
 #[inline(always)]
-pub(super) fn any_rays<T: TriangleTest, L: Lane, const N: usize, const K: usize>(
+pub(super) fn any_rays<T: TriangleTest, L: Lane, const N: usize, const K: usize, F: HitFilter>(
     packs: &[TriangleLanes<L, N>],
     single: &[PreparedRay; K],
     mask: u32,
+    f: &mut F,
 ) -> u32 {
     let mut hit = 0;
     let mut m = mask;
@@ -177,7 +181,7 @@ pub(super) fn any_rays<T: TriangleTest, L: Lane, const N: usize, const K: usize>
         let i = m.trailing_zeros() as usize;
         m &= m - 1;
         if let Some(r) = single.get(i)
-            && packs.iter().any(|p| T::hit_mask_lanes(r, p) != 0)
+            && packs.iter().any(|p| any_in_pack::<T, L, N, F>(r, p, f))
         {
             hit |= 1 << i;
         }
@@ -190,7 +194,7 @@ mod tests {
     use super::*;
     use crate::geometry::Ray;
     use crate::intersect::TriangleX8;
-    use crate::traverse::{Moller, Watertight};
+    use crate::traverse::{AcceptAll, Moller, Watertight};
     use glam::Vec3;
 
     fn check<T: TriangleTest>() {
@@ -209,8 +213,8 @@ mod tests {
             core::array::from_fn(|i| PreparedRay::new(&Ray::new(Vec3::new(i as f32 * 0.4 - 1.0, 0.0, 0.0), Vec3::Z)));
         let mask = 0b1011_0110;
         let (mut rays, mut best) = (single, [None; 8]);
-        let hit = closest_rays::<T, _, 8, 8>(&packs, &mut rays, &mut best, mask);
-        assert_eq!(any_rays::<T, _, 8, 8>(&packs, &single, mask), hit);
+        let hit = closest_rays::<T, _, 8, 8, _>(&packs, &mut rays, &mut best, mask, &mut AcceptAll);
+        assert_eq!(any_rays::<T, _, 8, 8, _>(&packs, &single, mask, &mut AcceptAll), hit);
         for i in 0..8 {
             let mut r = single[i];
             let mut want = None;

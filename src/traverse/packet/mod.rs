@@ -63,7 +63,7 @@ pub use tile::TileShape;
 #[cfg(feature = "alloc")]
 pub use tile::image_rays;
 
-use super::{Conservative, TriangleTest};
+use super::{AcceptAll, Conservative, HitFilter, TriangleTest};
 use crate::geometry::{Hit, Ray, Triangles};
 use crate::layout::BvhWideRef;
 use crate::math::{Lane, f32x4, f32x8};
@@ -215,7 +215,41 @@ pub fn intersect_packet<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     switch: u32,
 ) {
     const { assert!(R::N == K && K <= 16) };
-    wide::intersect::<Conservative<T>, L, N, R, K>(bvh, rays, hits, switch);
+    wide::intersect::<Conservative<T>, L, N, R, K, _>(bvh, rays, hits, switch, &mut AcceptAll);
+}
+
+/// [`intersect_packet`] counting only the hits `filter` accepts ([`HitFilter`]: alpha tests,
+/// masks; Embree's filter functions on `rtcIntersect8`): per lane the nearest accepted hit, the
+/// same `t` as [`wide::intersect_filtered`](crate::traverse::wide::intersect_filtered) for a filter
+/// that is a function of the hit (and the same primitive unless two tie). The packet still
+/// shares its box tests; leaves are tested lane by lane with the single-ray kernels, which ask the
+/// filter before they commit a hit. The filter sees each lane's candidate hits in an order of
+/// the walk's choosing.
+///
+/// ```
+/// use strahl::{Hit, Ray, Vec3, build::BuildParams, layout::Bvh8, math::f32x8};
+/// use strahl::traverse::{Watertight, packet};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b8, _) = Bvh8::build(&tris[..], &BuildParams::default()).unwrap();
+/// let rays: Vec<Ray> = (0..8).map(|i| Ray::new(Vec3::new(i as f32 * 0.05, 0.1, -3.0), Vec3::Z)).collect();
+/// // Cut out the odd triangles: some rays go on to the back of the sphere.
+/// let even = |h: &Hit| h.prim % 2 == 0;
+/// let mut hits = [None; 8];
+/// packet::intersect_packet_filtered::<Watertight, _, 8, f32x8, 8>(b8.view(), &rays, &mut hits, packet::DEFAULT_SWITCH, even);
+/// for (r, h) in rays.iter().zip(&hits) {
+///     assert_eq!(*h, b8.intersect_filtered::<Watertight>(r, even));
+/// }
+/// ```
+#[inline]
+pub fn intersect_packet_filtered<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    hits: &mut [Option<Hit>],
+    switch: u32,
+    mut filter: impl HitFilter,
+) {
+    const { assert!(R::N == K && K <= 16) };
+    wide::intersect::<Conservative<T>, L, N, R, K, _>(bvh, rays, hits, switch, &mut filter);
 }
 
 /// Any-hit answers of up to `K` rays (`occluded[i]` for `rays[i]`) through the wide BVH `bvh`:
@@ -246,7 +280,33 @@ pub fn occluded_packet<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
     switch: u32,
 ) {
     const { assert!(R::N == K && K <= 16) };
-    wide::occluded::<Conservative<T>, L, N, R, K>(bvh, rays, occluded, switch);
+    wide::occluded::<Conservative<T>, L, N, R, K, _>(bvh, rays, occluded, switch, &mut AcceptAll);
+}
+
+/// [`occluded_packet`] counting only the hits `filter` accepts (see
+/// [`intersect_packet_filtered`]): `occluded[i]` is whether `rays[i]` has an accepted hit, as
+/// [`wide::occluded_filtered`](crate::traverse::wide::occluded_filtered) answers.
+///
+/// ```
+/// use strahl::{Hit, Ray, Vec3, build::BuildParams, layout::Bvh8, math::f32x8};
+/// use strahl::traverse::{Moller, packet};
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (b8, _) = Bvh8::build(&tris[..], &BuildParams::default()).unwrap();
+/// let rays: Vec<Ray> = (0..8).map(|i| Ray::new(Vec3::new(i as f32 * 0.05, 0.1, -3.0), Vec3::Z)).collect();
+/// let mut occ = [true; 8];
+/// packet::occluded_packet_filtered::<Moller, _, 8, f32x8, 8>(b8.view(), &rays, &mut occ, 0, |_: &Hit| false);
+/// assert_eq!(occ, [false; 8]); // every hit rejected: nothing blocks
+/// ```
+#[inline]
+pub fn occluded_packet_filtered<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
+    bvh: BvhWideRef<'_, L, N>,
+    rays: &[Ray],
+    occluded: &mut [bool],
+    switch: u32,
+    mut filter: impl HitFilter,
+) {
+    const { assert!(R::N == K && K <= 16) };
+    wide::occluded::<Conservative<T>, L, N, R, K, _>(bvh, rays, occluded, switch, &mut filter);
 }
 
 /// Closest hits of up to 4 rays through a wide BVH ([`intersect_packet`] with [`f32x4`] lanes).

@@ -8,8 +8,8 @@ use crate::intersect::aabb::FAR_SLACK;
 use crate::intersect::{PreparedPacket, PreparedRay};
 use crate::layout::{BvhWideRef, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs};
 use crate::math::Lane;
-use crate::traverse::TriangleTest;
-use crate::traverse::wide::{intersect_from, occluded_prepared_from};
+use crate::traverse::wide::{intersect_from_filtered, occluded_from_filtered};
+use crate::traverse::{HitFilter, TriangleTest, prepare};
 
 /// Stack entries: enough for `MAX_WIDE_DEPTH` levels of 8-wide nodes.
 const STACK: usize = MAX_WIDE_DEPTH as usize * 7 + 1;
@@ -498,19 +498,36 @@ fn copy_out<T: Copy, const K: usize>(dst: &mut [T], src: &[T; K]) {
     }
 }
 
-/// Closest hits of up to `K` rays (see [`intersect_packet`](super::intersect_packet)).
-pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
+/// One ray's closest hit that `f` accepts, as [`wide::intersect_filtered`](crate::traverse::wide::intersect_filtered)
+/// (without taking the filter by value).
+#[inline(always)]
+fn closest_single<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+    bvh: BvhWideRef<'_, L, N>,
+    ray: &Ray,
+    f: &mut F,
+) -> Option<Hit> {
+    let mut r = prepare::<T>(ray);
+    if r.is_empty() || bvh.nodes.is_empty() {
+        return None;
+    }
+    intersect_from_filtered::<T, L, N, F>(bvh, 0, &mut r, f)
+}
+
+/// Closest hits of up to `K` rays that `f` accepts (see
+/// [`intersect_packet_filtered`](super::intersect_packet_filtered)).
+pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, F: HitFilter>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[Ray],
     hits: &mut [Option<Hit>],
     switch: u32,
+    f: &mut F,
 ) {
     let n = rays.len().min(hits.len()).min(K);
     let mut single = [PreparedRay::EMPTY; K];
     let (active, coherent, lanes) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (h, r) in hits[..n].iter_mut().zip(rays) {
-                *h = crate::traverse::wide::intersect::<T, L, N>(bvh, r);
+                *h = closest_single::<T, L, N, F>(bvh, r, f);
             }
             return;
         }
@@ -533,29 +550,31 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
-            best[i] = intersect_from::<T, L, N>(bvh, 0, &mut single[i]);
+            best[i] = intersect_from_filtered::<T, L, N, F>(bvh, 0, &mut single[i], f);
         }
     } else if coherent {
-        walk_interval::<T, L, N, R, K, false>(bvh, lanes, &rays[..n], &mut single, &mut best, active);
+        walk_interval::<T, L, N, R, K, false, F>(bvh, lanes, &rays[..n], &mut single, &mut best, active, f);
     } else {
-        masked_walk::<T, L, N, R, K, false>(bvh, &lanes.neg, &mut single, &mut best, active, switch);
+        masked_walk::<T, L, N, R, K, false, F>(bvh, &lanes.neg, &mut single, &mut best, active, switch, f);
     }
     copy_out(&mut hits[..n], &best);
 }
 
-/// Any-hit answers of up to `K` rays (see [`occluded_packet`](super::occluded_packet)).
-pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize>(
+/// Any-hit answers of up to `K` rays counting the hits `f` accepts (see
+/// [`occluded_packet_filtered`](super::occluded_packet_filtered)).
+pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, F: HitFilter>(
     bvh: BvhWideRef<'_, L, N>,
     rays: &[Ray],
     occluded: &mut [bool],
     switch: u32,
+    f: &mut F,
 ) {
     let n = rays.len().min(occluded.len()).min(K);
     let mut single = [PreparedRay::EMPTY; K];
     let (active, coherent, lanes) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (o, r) in occluded[..n].iter_mut().zip(rays) {
-                *o = crate::traverse::wide::occluded::<T, L, N>(bvh, r);
+                *o = occluded_from_filtered::<T, L, N, F>(bvh, 0, &prepare::<T>(r), f);
             }
             return;
         }
@@ -575,15 +594,15 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
-            if occluded_prepared_from::<T, L, N>(bvh, 0, &single[i]) {
+            if occluded_from_filtered::<T, L, N, F>(bvh, 0, &single[i], f) {
                 mask |= 1 << i;
             }
         }
     } else if coherent {
-        mask = walk_interval::<T, L, N, R, K, true>(bvh, lanes, &rays[..n], &mut single, &mut [None; K], active);
+        mask = walk_interval::<T, L, N, R, K, true, F>(bvh, lanes, &rays[..n], &mut single, &mut [None; K], active, f);
     } else {
         let mut best = [None; K];
-        mask = masked_walk::<T, L, N, R, K, true>(bvh, &lanes.neg, &mut single, &mut best, active, switch);
+        mask = masked_walk::<T, L, N, R, K, true, F>(bvh, &lanes.neg, &mut single, &mut best, active, switch, f);
     }
     for (i, o) in occluded[..n].iter_mut().enumerate() {
         *o = mask >> i & 1 == 1;
@@ -594,13 +613,15 @@ pub(super) fn occluded<T: TriangleTest, L: Lane, const N: usize, R: Lane, const 
 /// sign masks of the root test's lanes (the prepared rays' signs, full lane masks in every lane).
 /// Returns the occluded lanes (`ANY`) or 0.
 #[inline(always)]
-fn masked_walk<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool>(
+#[allow(clippy::too_many_arguments)]
+fn masked_walk<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool, F: HitFilter>(
     bvh: BvhWideRef<'_, L, N>,
     neg: &[R; 3],
     single: &mut [PreparedRay; K],
     best: &mut [Option<Hit>; K],
     active: u32,
     switch: u32,
+    filter: &mut F,
 ) -> u32 {
     let mut packet = PreparedPacket::<R, K>::from_prepared(single);
     let mut leaves = Leaves::<R, K>::new(single);
@@ -610,21 +631,23 @@ fn masked_walk<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize
         single,
         lanes: &mut leaves,
         best,
+        filter,
     }
     .run::<T, L, N, ANY>(bvh, active, switch)
 }
 
 /// The state of one masked walk: the packet, its sign lanes, the same rays as single rays (for the
-/// hybrid), the leaf kernels' hit lanes and the closest hits so far.
-struct Walk<'a, R, const K: usize> {
+/// hybrid), the leaf kernels' hit lanes, the closest hits so far and the hit filter.
+struct Walk<'a, R, const K: usize, F> {
     packet: &'a mut PreparedPacket<R, K>,
     neg: &'a [R; 3],
     single: &'a mut [PreparedRay; K],
     lanes: &'a mut Leaves<R, K>,
     best: &'a mut [Option<Hit>; K],
+    filter: &'a mut F,
 }
 
-impl<R: Lane, const K: usize> Walk<'_, R, K> {
+impl<R: Lane, const K: usize, F: HitFilter> Walk<'_, R, K, F> {
     /// Finishes the lanes of `mask` below `code` as single rays; returns the lanes found occluded
     /// (`ANY`) or 0.
     #[inline(never)]
@@ -639,10 +662,10 @@ impl<R: Lane, const K: usize> Walk<'_, R, K> {
             let i = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             if ANY {
-                if occluded_prepared_from::<T, L, N>(bvh, code, &self.single[i]) {
+                if occluded_from_filtered::<T, L, N, F>(bvh, code, &self.single[i], self.filter) {
                     occluded |= 1 << i;
                 }
-            } else if let Some(h) = intersect_from::<T, L, N>(bvh, code, &mut self.single[i]) {
+            } else if let Some(h) = intersect_from_filtered::<T, L, N, F>(bvh, code, &mut self.single[i], self.filter) {
                 self.best[i] = Some(h);
             }
         }
@@ -725,7 +748,11 @@ impl<R: Lane, const K: usize> Walk<'_, R, K> {
                     }
                 }
             } else if code != EMPTY_CHILD {
-                let hit = self.leaf::<T, L, N>(bvh, code, mask);
+                let hit = if F::ACCEPTS_ALL {
+                    self.leaf::<T, L, N>(bvh, code, mask)
+                } else {
+                    self.leaf_filtered::<T, L, N, ANY>(bvh, code, mask)
+                };
                 if hit != 0 {
                     if ANY {
                         // Any hit: retire the lanes hit; stop when none is left.
@@ -735,7 +762,8 @@ impl<R: Lane, const K: usize> Walk<'_, R, K> {
                             return occluded;
                         }
                         self.retire(active);
-                    } else {
+                    } else if F::ACCEPTS_ALL {
+                        // (A filtered leaf has set its lanes' hits and `tmax` itself.)
                         sync_tmax(self.packet, self.single);
                         let mut h = hit;
                         while h != 0 {
@@ -796,6 +824,32 @@ impl<R: Lane, const K: usize> Walk<'_, R, K> {
         }
         self.lanes.end(self.packet);
         hit_any
+    }
+
+    /// [`leaf`](Self::leaf) with a hit filter: each lane of `mask` as a single ray with the
+    /// filtered single-ray kernels (the packet kernels test a triangle for all lanes at once, and
+    /// commit before a filter could answer). For closest hits, the lanes' hits go to `best` and
+    /// their `tmax` to the packet. Returns the lanes hit.
+    #[inline(always)]
+    fn leaf_filtered<T: TriangleTest, L: Lane, const N: usize, const ANY: bool>(
+        &mut self,
+        bvh: BvhWideRef<'_, L, N>,
+        code: u32,
+        mask: u32,
+    ) -> u32 {
+        let (first, count) = leaf_packs(code);
+        let Some(packs) = bvh.packs.get(first..first + count) else {
+            return 0;
+        };
+        if ANY {
+            any_rays::<T, L, N, K, F>(packs, self.single, mask, self.filter)
+        } else {
+            let hit = closest_rays::<T, L, N, K, F>(packs, self.single, self.best, mask, self.filter);
+            if hit != 0 {
+                self.packet.tmax = tmax_lanes::<R, K>(self.single);
+            }
+            hit
+        }
     }
 }
 
@@ -864,13 +918,15 @@ fn product_hi<L: Lane>(a0: L, a1: L, b0: f32, b1: f32, guard: bool) -> L {
 /// as the packs, each triangle against the whole packet ([`TriangleTest::closest_packet_leaf`]),
 /// else each lane with the single-ray x`N` kernel; exact per lane either way, so the answers equal
 /// single rays. Returns the occluded lanes (`ANY`) or 0.
-fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool>(
+#[allow(clippy::too_many_arguments)]
+fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, const ANY: bool, F: HitFilter>(
     bvh: BvhWideRef<'_, L, N>,
     mut p: Slabs<R>,
     rays: &[Ray],
     single: &mut [PreparedRay; K],
     best: &mut [Option<Hit>; K],
     mut active: u32,
+    f: &mut F,
 ) -> u32 {
     // The rays as single rays, prepared only where a kernel needs them (most coherent packets
     // never do: their leaves take the triangle-major kernel), with the lanes' `tmax` so far.
@@ -917,10 +973,10 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                 let i = m.trailing_zeros() as usize;
                 m &= m - 1;
                 if ANY {
-                    if occluded_prepared_from::<T, L, N>(bvh, 0, &single[i]) {
+                    if occluded_from_filtered::<T, L, N, F>(bvh, 0, &single[i], f) {
                         occluded |= 1 << i;
                     }
-                } else if let Some(h) = intersect_from::<T, L, N>(bvh, 0, &mut single[i]) {
+                } else if let Some(h) = intersect_from_filtered::<T, L, N, F>(bvh, 0, &mut single[i], f) {
                     best[i] = Some(h);
                 }
             }
@@ -996,7 +1052,7 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                 // 1.1-2x slower; the SoA one below wins where the packet fills its lanes.
                 let hit_any = if ANY {
                     singles(&mut ready, T::WATERTIGHT, rays, single, p.tmax, active);
-                    any_rays::<T, L, N, K>(packs, single, m)
+                    any_rays::<T, L, N, K, F>(packs, single, m, f)
                 } else {
                     // PERF: where the packet is at least as wide as the packs and at least half
                     // its lanes enter the leaf, each valid triangle is tested against the whole
@@ -1005,7 +1061,8 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                     // packets that reach a triangle 14.4 -> 13.0 ms, all 25.45 -> 24.5 ms; at
                     // 512 x 512 no change. With fewer lanes than pack lanes (4-ray packets over
                     // a BVH8) it was slower (1.22x -> 1.11x single rays), so those stay per lane.
-                    let tri_major = if K >= N && m.count_ones() as usize * 2 >= K {
+                    // (A hit filter takes the per-lane kernels: they ask it before committing.)
+                    let tri_major = if F::ACCEPTS_ALL && K >= N && m.count_ones() as usize * 2 >= K {
                         let tmax = R::from_bitmask(m).select(p.tmax, R::splat(f32::NEG_INFINITY));
                         T::closest_packet_leaf(p.origin, p.direction, p.tmin, tmax, packs)
                     } else {
@@ -1040,7 +1097,7 @@ fn walk_interval<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usi
                         }
                         None => {
                             singles(&mut ready, T::WATERTIGHT, rays, single, p.tmax, active);
-                            let h = closest_rays::<T, L, N, K>(packs, single, best, m);
+                            let h = closest_rays::<T, L, N, K, F>(packs, single, best, m, f);
                             if h != 0 {
                                 p.tmax = tmax_lanes::<R, K>(single);
                             }
