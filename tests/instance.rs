@@ -1121,3 +1121,69 @@ fn blas_boxes_that_overflow_in_the_transform_leave_the_instance_out() {
     let tlas = Tlas::build(&[Instance::new(Affine3A::from_scale(Vec3::splat(4.0)), 0)], &b8).unwrap();
     assert_eq!(tlas.left_out(), 1);
 }
+
+/// The BLASes as views read in place from (aligned) bytes, as references and as shared pointers:
+/// the same TLAS (node for node) and the same answers as over the owned trees, for single rays,
+/// masks, filters, packets and batches.
+#[test]
+fn blases_in_place_and_shared_answer_as_owned() {
+    use std::sync::Arc;
+    use strahl::layout::Bvh8Ref;
+    #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+    #[repr(C, align(64))]
+    struct Block([u8; 64]);
+    let meshes = meshes();
+    let b8 = blases::<strahl::math::f32x8, 8>(&meshes);
+    let inst = instances(300, meshes.len() as u32, 40.0, 91);
+    // Each BLAS saved and read back in place from a buffer of 64-byte blocks (a memory map's pages).
+    let stores: Vec<Vec<Block>> = b8
+        .iter()
+        .map(|b| {
+            let bytes = b.to_bytes();
+            let mut blocks = vec![Block([0; 64]); bytes.len().div_ceil(64)];
+            bytemuck::cast_slice_mut::<Block, u8>(&mut blocks)[..bytes.len()].copy_from_slice(&bytes);
+            blocks
+        })
+        .collect();
+    let views: Vec<Bvh8Ref> = stores
+        .iter()
+        .zip(&b8)
+        .map(|(blocks, b)| Bvh8Ref::from_bytes(&bytemuck::cast_slice(blocks)[..b.to_bytes().len()]).unwrap())
+        .collect();
+    let refs: Vec<&strahl::layout::Bvh8> = b8.iter().collect();
+    let shared: Vec<Arc<strahl::layout::Bvh8>> = b8.iter().cloned().map(Arc::new).collect();
+    let owned = Tlas::build(&inst, &b8).unwrap();
+    for tlas in [
+        Tlas::build(&inst, &views).unwrap(),
+        Tlas::build(&inst, &refs).unwrap(),
+        Tlas::build(&inst, &shared).unwrap(),
+    ] {
+        assert_eq!(tlas.bvh().nodes, owned.bvh().nodes);
+    }
+    let rays = rays(300, &inst, 40.0, 92);
+    let odd = |h: &InstanceHit| h.hit.prim % 2 == 1;
+    let mut hits = 0;
+    for r in &rays {
+        let want = owned.intersect::<Moller, _, 8>(&b8, r);
+        hits += usize::from(want.is_some());
+        assert_eq!(owned.intersect::<Moller, _, 8>(&views, r), want);
+        assert_eq!(owned.intersect::<Moller, _, 8>(&refs, r), want);
+        assert_eq!(owned.intersect::<Moller, _, 8>(&shared, r), want);
+        assert_eq!(owned.occluded::<Moller, _, 8>(&views, r), want.is_some());
+        assert_eq!(
+            owned.intersect_masked_filtered::<Moller, _, 8>(&views, r, 0b1, odd),
+            owned.intersect_masked_filtered::<Moller, _, 8>(&b8, r, 0b1, odd)
+        );
+    }
+    assert!(hits > 50, "only {hits} hits");
+    for chunk in rays.chunks(8) {
+        let (mut a, mut b) = ([None; 8], [None; 8]);
+        owned.intersect8::<Moller, _, 8>(&b8, chunk, &mut a);
+        owned.intersect8::<Moller, _, 8>(&views, chunk, &mut b);
+        assert_eq!(a, b);
+    }
+    let (mut a, mut b) = (vec![false; rays.len()], vec![false; rays.len()]);
+    owned.occluded_batch_par::<Moller, _, 8>(&b8, &rays, &mut a, 2);
+    owned.occluded_batch_par::<Moller, _, 8>(&shared, &rays, &mut b, 2);
+    assert_eq!(a, b);
+}

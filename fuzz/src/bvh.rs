@@ -1,5 +1,5 @@
 //! The `bvh` target: every builder (and the treelet pass, and spatial splits), the BVH4/BVH8
-//! collapse, single-ray traversal of all three trees and 8-ray packets, and the BVH8 refit,
+//! collapse, single-ray traversal of all three trees and 8-ray packets (also with a hit filter), and the BVH8 refit,
 //! against brute force.
 //!
 //! Input layout (every byte string decodes; see [`decode`](crate::decode) for values):
@@ -24,6 +24,7 @@ use strahl::build::{
 use strahl::geometry::{Hit, Triangle};
 use strahl::intersect::{PreparedRay, watertight};
 use strahl::layout::{Bvh4, Bvh8};
+use strahl::math::f32x8;
 use strahl::traverse::{Fast, Watertight, packet, wide};
 use strahl::{Ray, Vec3};
 
@@ -226,6 +227,24 @@ pub fn check_bvh(case: &BvhCase) {
         packet::intersect8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_pure, 0);
         let mut packet_occ = [false; 8];
         packet::occluded8::<Watertight, _, 8>(b8.view(), &case.rays, &mut packet_occ);
+        // Filtered packets (even primitives only), checked with the filtered single rays below.
+        let even = |h: &Hit| h.prim.is_multiple_of(2);
+        let mut packet_even = [None; 8];
+        packet::intersect_packet_filtered::<Watertight, _, 8, f32x8, 8>(
+            b8.view(),
+            &case.rays,
+            &mut packet_even,
+            0,
+            even,
+        );
+        let mut packet_even_occ = [false; 8];
+        packet::occluded_packet_filtered::<Watertight, _, 8, f32x8, 8>(
+            b8.view(),
+            &case.rays,
+            &mut packet_even_occ,
+            packet::DEFAULT_SWITCH,
+            even,
+        );
         // The incoherent batch answers exactly as one call per ray, on every scene (tame or not).
         let mut batch_occ = vec![false; case.rays.len()];
         b8.occluded_batch_incoherent::<Watertight>(&case.rays, &mut batch_occ);
@@ -363,7 +382,6 @@ pub fn check_bvh(case: &BvhCase) {
                 what("bvh8 fast occluded")
             );
             // A hit filter (even primitives only): the nearest accepted hit, and whether there is one.
-            let even = |h: &Hit| h.prim.is_multiple_of(2);
             let want_even = strahl::traverse::intersect_brute_force_filtered::<Watertight, _, _>(&kept[..], ray, even);
             agrees(
                 &kept,
@@ -385,10 +403,18 @@ pub fn check_bvh(case: &BvhCase) {
                 "{}",
                 what("bvh8 filtered occluded")
             );
+            agrees(&kept, ray, packet_even[i], want_even, &what("packet8 filtered"));
+            assert_eq!(
+                packet_even_occ[i],
+                want_even.is_some(),
+                "{}",
+                what("packet8 filtered occluded")
+            );
             // `agrees` allows another primitive at a tied `t`: it must pass the filter too.
             for (tree, got) in [
                 ("bvh2", b2.intersect_filtered::<Watertight, _>(tris, ray, even)),
                 ("bvh8", b8.intersect_filtered::<Watertight>(ray, even)),
+                ("packet8", packet_even[i]),
             ] {
                 assert!(got.is_none_or(|h| even(&h)), "{}: a rejected hit {got:?}", what(tree));
             }

@@ -3,7 +3,7 @@
 use crate::build::{BuildError, BuildParams, Bvh2, usable_box};
 use crate::geometry::{Aabb, Hit, Ray};
 use crate::intersect::AabbLanes;
-use crate::layout::{BvhWide, EMPTY_CHILD, LEAF_BIT};
+use crate::layout::{BvhWide, BvhWideRef, EMPTY_CHILD, LEAF_BIT};
 use crate::math::{Lane, f32x4, f32x8};
 use crate::traverse::packet::BoxPacket;
 use crate::traverse::packet::stack::{Entry, MaskStack};
@@ -14,6 +14,71 @@ use crate::traverse::{
 use alloc::vec;
 use alloc::vec::Vec;
 use glam::{Affine3A, Vec3};
+
+/// A bottom-level tree a [`Tlas`] can instance: anything that gives a view of a wide BVH. The
+/// traversals and builds take `&[impl Blas<L, N>]`, so the BLASes may be owned trees
+/// ([`BvhWide`]), views of trees read in place ([`BvhWideRef`], e.g. from a memory map with
+/// [`BvhWideRef::from_bytes`]), or references and shared pointers to either (`&B`, `Box<B>`,
+/// `Arc<B>`), held wherever the engine keeps them.
+///
+/// ```
+/// use strahl::{Ray, Vec3, build::BuildParams, layout::{Bvh8, Bvh8Ref, Instance, Tlas}, traverse::Moller};
+/// use strahl::glam::Affine3A;
+/// let tris = strahl::scene::icosphere(2).to_soup();
+/// let (owned, _) = Bvh8::build(&tris[..], &BuildParams::default()).unwrap();
+/// let instances = [Instance::new(Affine3A::from_translation(Vec3::new(0.0, 0.0, 5.0)), 0)];
+/// let ray = Ray::new(Vec3::new(0.1, 0.2, 0.0), Vec3::Z);
+/// // Owned trees, views, references: the same TLAS, the same hits.
+/// let tlas = Tlas::build(&instances, &[&owned]).unwrap();
+/// let views: [Bvh8Ref; 1] = [owned.view()];
+/// let shared = [std::sync::Arc::new(owned.clone())];
+/// let want = tlas.intersect::<Moller, _, 8>(&[&owned], &ray).unwrap();
+/// assert_eq!(tlas.intersect::<Moller, _, 8>(&views, &ray), Some(want));
+/// assert_eq!(tlas.intersect::<Moller, _, 8>(&shared, &ray), Some(want));
+/// assert!((want.hit.t - 4.0).abs() < 0.05);
+/// ```
+pub trait Blas<L, const N: usize> {
+    /// The tree as a view.
+    fn blas(&self) -> BvhWideRef<'_, L, N>;
+}
+
+impl<L: Lane, const N: usize> Blas<L, N> for BvhWide<L, N> {
+    #[inline(always)]
+    fn blas(&self) -> BvhWideRef<'_, L, N> {
+        self.view()
+    }
+}
+
+impl<L, const N: usize> Blas<L, N> for BvhWideRef<'_, L, N> {
+    #[inline(always)]
+    fn blas(&self) -> BvhWideRef<'_, L, N> {
+        BvhWideRef {
+            nodes: self.nodes,
+            packs: self.packs,
+        }
+    }
+}
+
+impl<L, const N: usize, B: Blas<L, N> + ?Sized> Blas<L, N> for &B {
+    #[inline(always)]
+    fn blas(&self) -> BvhWideRef<'_, L, N> {
+        (**self).blas()
+    }
+}
+
+impl<L, const N: usize, B: Blas<L, N> + ?Sized> Blas<L, N> for alloc::boxed::Box<B> {
+    #[inline(always)]
+    fn blas(&self) -> BvhWideRef<'_, L, N> {
+        (**self).blas()
+    }
+}
+
+impl<L, const N: usize, B: Blas<L, N> + ?Sized> Blas<L, N> for alloc::sync::Arc<B> {
+    #[inline(always)]
+    fn blas(&self) -> BvhWideRef<'_, L, N> {
+        (**self).blas()
+    }
+}
 
 /// One placement of a bottom-level tree: its object-to-world transform, which tree (an index
 /// into the slice of BLASes given to [`Tlas::build`] and to the traversals) and its visibility
@@ -101,8 +166,9 @@ impl<F: HitFilter<InstanceHit>> HitFilter for InInstance<'_, F> {
     }
 }
 
-/// Instancing: a two-level BVH. Each [`Instance`] places one bottom-level tree (a [`BvhWide`],
-/// the BLAS, built once in its object space) in the world by an affine transform; a [`Tlas`] is a
+/// Instancing: a two-level BVH. Each [`Instance`] places one bottom-level tree (a [`BvhWide`] or
+/// anything else that is a [`Blas`], such as a view read in place; the BLAS, built once in its
+/// object space) in the world by an affine transform; a [`Tlas`] is a
 /// 4-wide BVH over the instances' world boxes. A ray walks the TLAS in world space; at each
 /// instance it is taken into object space by the instance's inverse transform and traced through
 /// the BLAS with the same wide traversal as any other tree ([`traverse::wide`](crate::traverse::wide)),
@@ -374,7 +440,7 @@ fn grow_world<L: Lane>(lo: &mut [L; 3], hi: &mut [L; 3], m: &Affine3A, b: &AabbL
 }
 
 /// The world box of `inst` and its inverse transform, or `None` where the instance is left out.
-fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> Option<(Aabb, Affine3A)> {
+fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[impl Blas<L, N>]) -> Option<(Aabb, Affine3A)> {
     let m = inst.transform;
     let finite = m.matrix3.is_finite() && m.translation.is_finite();
     if !finite || !m.matrix3.determinant().abs().is_normal() {
@@ -384,7 +450,7 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
     if !(inv.matrix3.is_finite() && inv.translation.is_finite()) {
         return None;
     }
-    let blas = blases.get(inst.blas as usize)?;
+    let blas = blases.get(inst.blas as usize)?.blas();
     let root = blas.nodes.first()?;
     let b = root.bounds.union();
     if !(b.min.is_finite() && b.max.is_finite()) || b.min.cmpgt(b.max).any() {
@@ -427,7 +493,7 @@ fn place<L: Lane, const N: usize>(inst: &Instance, blases: &[BvhWide<L, N>]) -> 
 fn place_range<L: Lane, const N: usize>(
     placed: &[bool],
     instances: &[Instance],
-    blases: &[BvhWide<L, N>],
+    blases: &[impl Blas<L, N>],
     boxes: &mut [Aabb],
     inverse: &mut [Affine3A],
 ) {
@@ -461,7 +527,7 @@ impl Tlas {
     /// ```
     pub fn build<L: Lane, const N: usize>(
         instances: &[Instance],
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
     ) -> Result<Self, BuildError> {
         Self::build_with(instances, blases, &BuildParams::quality())
     }
@@ -491,7 +557,7 @@ impl Tlas {
     /// ```
     pub fn build_with<L: Lane, const N: usize>(
         instances: &[Instance],
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         params: &BuildParams,
     ) -> Result<Self, BuildError> {
         let mut boxes = Vec::with_capacity(instances.len());
@@ -668,7 +734,7 @@ impl Tlas {
     /// assert!(!tlas.refit(&[at(0.0)], &blases)); // one instance fewer: nothing changes
     /// assert_eq!(tlas.left_out(), 1);
     /// ```
-    pub fn refit<L: Lane, const N: usize>(&mut self, instances: &[Instance], blases: &[BvhWide<L, N>]) -> bool {
+    pub fn refit<L: Lane, const N: usize>(&mut self, instances: &[Instance], blases: &[impl Blas<L, N>]) -> bool {
         self.refit_with(instances, |placed, boxes, inverse| {
             place_range(placed, instances, blases, boxes, inverse);
         })
@@ -693,7 +759,7 @@ impl Tlas {
     pub fn refit_par<L: Lane, const N: usize>(
         &mut self,
         instances: &[Instance],
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N> + Sync],
         threads: usize,
     ) -> bool {
         let threads = threads.clamp(1, crate::build::MAX_THREADS);
@@ -855,7 +921,7 @@ impl Tlas {
     /// ```
     pub fn intersect<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         ray: &Ray,
     ) -> Option<InstanceHit> {
         self.walk::<T, L, N, _, false, false>(blases, ray, u32::MAX, &mut AcceptAll)
@@ -874,7 +940,7 @@ impl Tlas {
     /// assert!(!tlas.occluded::<Moller, _, 8>(&blases, &Ray::with_range(Vec3::ZERO, Vec3::Z, 0.0, 3.0)));
     /// assert!(tlas.occluded::<Moller, _, 8>(&blases, &Ray::with_range(Vec3::ZERO, Vec3::Z, 0.0, 4.5)));
     /// ```
-    pub fn occluded<T: TriangleTest, L: Lane, const N: usize>(&self, blases: &[BvhWide<L, N>], ray: &Ray) -> bool {
+    pub fn occluded<T: TriangleTest, L: Lane, const N: usize>(&self, blases: &[impl Blas<L, N>], ray: &Ray) -> bool {
         self.walk::<T, L, N, _, true, false>(blases, ray, u32::MAX, &mut AcceptAll)
             .is_some()
     }
@@ -901,7 +967,7 @@ impl Tlas {
     /// ```
     pub fn intersect_filtered<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         ray: &Ray,
         mut filter: impl HitFilter<InstanceHit>,
     ) -> Option<InstanceHit> {
@@ -923,7 +989,7 @@ impl Tlas {
     /// ```
     pub fn occluded_filtered<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         ray: &Ray,
         mut filter: impl HitFilter<InstanceHit>,
     ) -> bool {
@@ -957,7 +1023,7 @@ impl Tlas {
     /// ```
     pub fn intersect_masked<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         ray: &Ray,
         ray_mask: u32,
     ) -> Option<InstanceHit> {
@@ -980,7 +1046,7 @@ impl Tlas {
     /// ```
     pub fn occluded_masked<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         ray: &Ray,
         ray_mask: u32,
     ) -> bool {
@@ -1013,7 +1079,7 @@ impl Tlas {
     /// ```
     pub fn intersect_masked_filtered<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         ray: &Ray,
         ray_mask: u32,
         mut filter: impl HitFilter<InstanceHit>,
@@ -1042,7 +1108,7 @@ impl Tlas {
     /// ```
     pub fn occluded_masked_filtered<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         ray: &Ray,
         ray_mask: u32,
         mut filter: impl HitFilter<InstanceHit>,
@@ -1074,7 +1140,7 @@ impl Tlas {
     /// ```
     pub fn intersect_batch<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         rays: &[Ray],
         hits: &mut [Option<InstanceHit>],
     ) {
@@ -1109,7 +1175,7 @@ impl Tlas {
     /// ```
     pub fn occluded_batch<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         rays: &[Ray],
         out: &mut [bool],
     ) {
@@ -1146,7 +1212,7 @@ impl Tlas {
     #[cfg(feature = "std")]
     pub fn intersect_batch_par<T: TriangleTest, L: Lane + Sync, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N> + Sync],
         rays: &[Ray],
         hits: &mut [Option<InstanceHit>],
         threads: usize,
@@ -1174,7 +1240,7 @@ impl Tlas {
     #[cfg(feature = "std")]
     pub fn occluded_batch_par<T: TriangleTest, L: Lane + Sync, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N> + Sync],
         rays: &[Ray],
         out: &mut [bool],
         threads: usize,
@@ -1217,7 +1283,7 @@ impl Tlas {
     /// ```
     pub fn intersect8<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         rays: &[Ray],
         hits: &mut [Option<InstanceHit>],
     ) {
@@ -1243,7 +1309,7 @@ impl Tlas {
     /// ```
     pub fn intersect8_masked<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         rays: &[Ray],
         ray_mask: u32,
         hits: &mut [Option<InstanceHit>],
@@ -1273,7 +1339,7 @@ impl Tlas {
     /// ```
     pub fn occluded8<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         rays: &[Ray],
         out: &mut [bool],
     ) {
@@ -1297,7 +1363,7 @@ impl Tlas {
     /// ```
     pub fn occluded8_masked<T: TriangleTest, L: Lane, const N: usize>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         rays: &[Ray],
         ray_mask: u32,
         out: &mut [bool],
@@ -1324,28 +1390,28 @@ impl Tlas {
     #[inline(always)]
     fn trace_instance<T: TriangleTest, L: Lane, const N: usize, F: HitFilter<InstanceHit>, const ANY: bool>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         i: u32,
         ray: &Ray,
         tmax: f32,
         f: &mut F,
     ) -> Option<Hit> {
         let inv = self.inverse.get(i as usize)?;
-        let blas = blases.get(*self.blas.get(i as usize)? as usize)?;
+        let blas = blases.get(*self.blas.get(i as usize)? as usize)?.blas();
         let mut r = prepare::<T>(&object_ray(inv, ray, tmax));
         if r.is_empty() || blas.nodes.is_empty() {
             return None;
         }
         let mut f = InInstance { f, instance: i };
         if ANY {
-            wide::occluded_prepared_filtered::<T, L, N, _>(blas.view(), &r, &mut f).then_some(Hit {
+            wide::occluded_prepared_filtered::<T, L, N, _>(blas, &r, &mut f).then_some(Hit {
                 t: tmax,
                 u: 0.0,
                 v: 0.0,
                 prim: crate::geometry::INVALID,
             })
         } else {
-            wide::intersect_from_filtered::<T, L, N, _>(blas.view(), 0, &mut r, &mut f)
+            wide::intersect_from_filtered::<T, L, N, _>(blas, 0, &mut r, &mut f)
         }
     }
 
@@ -1375,7 +1441,7 @@ impl Tlas {
         const MASKED: bool,
     >(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         ray: &Ray,
         ray_mask: u32,
         f: &mut F,
@@ -1486,7 +1552,7 @@ impl Tlas {
     #[inline(always)]
     fn walk_packet<T: TriangleTest, L: Lane, const N: usize, const ANY: bool>(
         &self,
-        blases: &[BvhWide<L, N>],
+        blases: &[impl Blas<L, N>],
         rays: &[Ray],
         ray_mask: u32,
     ) -> ([Option<InstanceHit>; PACKET], u32) {
@@ -1533,7 +1599,11 @@ impl Tlas {
                 if open != 0
                     && self.masks.get(i as usize).is_some_and(|&m| m & ray_mask != 0)
                     && let Some(inv) = self.inverse.get(i as usize)
-                    && let Some(blas) = self.blas.get(i as usize).and_then(|&b| blases.get(b as usize))
+                    && let Some(blas) = self
+                        .blas
+                        .get(i as usize)
+                        .and_then(|&b| blases.get(b as usize))
+                        .map(|b| b.blas())
                 {
                     // Lanes not open: the first open lane's ray with an empty range (inactive),
                     // not a zero direction, whose signs would make the BLAS packet take its
@@ -1553,7 +1623,7 @@ impl Tlas {
                     if ANY {
                         let mut out = [false; PACKET];
                         packet::occluded_packet::<T, L, N, f32x8, PACKET>(
-                            blas.view(),
+                            blas,
                             &local,
                             &mut out,
                             packet::DEFAULT_SWITCH,
@@ -1572,7 +1642,7 @@ impl Tlas {
                     } else {
                         let mut hits = [None; PACKET];
                         packet::intersect_packet::<T, L, N, f32x8, PACKET>(
-                            blas.view(),
+                            blas,
                             &local,
                             &mut hits,
                             packet::DEFAULT_SWITCH,

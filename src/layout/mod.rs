@@ -67,7 +67,7 @@ pub use bytes::{FormatError, HEADER_BYTES};
 #[cfg(feature = "alloc")]
 pub use collapse::{CollapseError, Collapser, WideBuildError};
 #[cfg(feature = "alloc")]
-pub use instance::{Instance, InstanceHit, Tlas};
+pub use instance::{Blas, Instance, InstanceHit, Tlas};
 
 /// Marks a leaf child code.
 ///
