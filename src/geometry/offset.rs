@@ -95,10 +95,17 @@ pub fn hit_point(tri: &Triangle, hit: &Hit) -> Vec3 {
 /// assert!(q.x > p.x && q.x - p.x <= 256.0 * 8.0); // 256 ULPs of 1e8 (an ULP is 8 there)
 /// assert_eq!((q.y, q.z), (-3.0, 0.0));
 /// assert_eq!(offset_origin(p, Vec3::ZERO), p);
+/// // Any length: the normal of a triangle with 1e-12 edges (1e-24), or a huge one, as `Vec3::X`.
+/// assert_eq!(offset_origin(p, Vec3::X * 1e-24), q);
+/// assert_eq!(offset_origin(p, Vec3::X * 1e30), q);
 /// ```
 #[inline]
 pub fn offset_origin(p: Vec3, n: Vec3) -> Vec3 {
-    let Some(n) = n.try_normalize() else {
+    // Scaled by its largest component first, so that normals whose squared length overflows
+    // (components beyond about 1e19) or underflows (below about 1e-19: the cross product of a
+    // triangle with 1e-10 edges) still normalise.
+    let m = n.abs().max_element();
+    let Some(n) = (if m > 0.0 && m.is_finite() { n / m } else { n }).try_normalize() else {
         return p;
     };
     if !p.is_finite() {
