@@ -226,6 +226,57 @@ fn bad_plans_are_errors_not_panics() {
     assert!(out.iter().all(|&ok| ok));
 }
 
+/// A transport that loses the last message of every exchange: `composite` answers with an error
+/// on every schedule (no panic on a missing message, no image with a piece left out), and a
+/// thread transport asked for a rank outside its group answers at once.
+#[test]
+fn lost_messages_and_unknown_ranks_are_errors() {
+    struct Lossy<'a>(&'a mut ThreadTransport);
+    impl Transport for Lossy<'_> {
+        fn rank(&self) -> u32 {
+            self.0.rank()
+        }
+        fn size(&self) -> u32 {
+            self.0.size()
+        }
+        fn exchange(
+            &mut self,
+            tag: u32,
+            sends: Vec<(u32, Vec<u8>)>,
+            from: &[u32],
+        ) -> Result<Vec<Vec<u8>>, strahl::composite::TransportError> {
+            let mut got = self.0.exchange(tag, sends, from)?;
+            got.pop();
+            Ok(got)
+        }
+    }
+    for p in [2u32, 3, 4] {
+        for schedule in schedules(p) {
+            let order: Vec<u32> = (0..p).collect();
+            let out = ThreadTransport::run(p, |t| {
+                let img = vec![DepthPixel(12345); 9];
+                let plan = Plan {
+                    schedule,
+                    order: &order,
+                    root: 0,
+                    sparse: true,
+                };
+                composite(&mut Lossy(t), &img, &plan).map(|(img, _)| img.is_some())
+            });
+            // Some rank receives, loses a message and fails; no rank returns an image.
+            assert!(out.iter().any(|r| r.is_err()), "{p} ranks, {schedule:?}: {out:?}");
+            assert!(
+                !out.iter().any(|r| matches!(r, Ok(true))),
+                "{p} ranks, {schedule:?}: an image"
+            );
+        }
+    }
+    let mut t = ThreadTransport::group(2).remove(0);
+    let start = std::time::Instant::now();
+    assert!(t.exchange(1, Vec::new(), &[5]).is_err());
+    assert!(start.elapsed() < std::time::Duration::from_secs(5));
+}
+
 /// Sort-first tiles: `render_tiles` and `render_tiles_into` put every pixel in place for image
 /// and tile sizes with partial edge tiles, tiles of 0 (taken as 1), tiles larger than the image
 /// and empty images, on 1 to 9 threads, both assignments; an image buffer of the wrong size is

@@ -64,6 +64,11 @@ fn check_x8(p: &[Vec3; 8], b: &Aabb) -> Result<(), TestCaseError> {
         );
         let cell = [cx.to_array()[i], cy.to_array()[i], cz.to_array()[i]];
         prop_assert_eq!(cell, q63.quantize_scalar(p[i]));
+        // 30-bit codes from the 63-bit quantizer: the x8 kernel equals the scalar, and both are
+        // the code of the cells' top 10 bits.
+        let c30_of_63 = morton30_x8(x, y, z, &q63).to_array();
+        prop_assert_eq!(c30_of_63[i], morton30_scalar(p[i], &q63));
+        prop_assert_eq!(c30_of_63[i], encode30(cell.map(|c| c >> 11)));
     }
     Ok(())
 }
@@ -92,6 +97,8 @@ fn check_order(p: Vec3, axis: usize, a: f32, b: f32, bounds: &Aabb) -> Result<()
     let (q30, q63) = (MortonQuantizer::new30(bounds), MortonQuantizer::new63(bounds));
     prop_assert!(morton30_scalar(p0, &q30) <= morton30_scalar(p1, &q30));
     prop_assert!(morton63_scalar(p0, &q63) <= morton63_scalar(p1, &q63));
+    // 30-bit codes of the 63-bit quantizer keep the order too.
+    prop_assert!(morton30_scalar(p0, &q63) <= morton30_scalar(p1, &q63));
     Ok(())
 }
 

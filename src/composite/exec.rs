@@ -116,6 +116,23 @@ impl core::fmt::Display for TransportError {
 
 impl core::error::Error for TransportError {}
 
+/// `t.exchange`, with the answer checked to hold one message per rank of `from`: a transport that
+/// returns fewer (or more) is an error here, not a panic or a piece of the image left out.
+fn exchange_checked<T: Transport + ?Sized>(
+    t: &mut T,
+    tag: u32,
+    sends: Vec<(u32, Vec<u8>)>,
+    from: &[u32],
+) -> Result<Vec<Vec<u8>>, TransportError> {
+    let got = t.exchange(tag, sends, from)?;
+    if got.len() != from.len() {
+        return Err(TransportError(
+            "the transport returned another number of messages than ranks asked",
+        ));
+    }
+    Ok(got)
+}
+
 /// Why compositing failed.
 ///
 /// ```
@@ -318,7 +335,7 @@ pub fn composite<P: Pixel, T: Transport>(
                     sends.push((real(m.to), wire));
                 }
                 let from: Vec<u32> = s.receives(v, round).map(|m| real(m.from)).collect();
-                let got = t.exchange(round as u32, sends, &from)?;
+                let got = exchange_checked(t, round as u32, sends, &from)?;
                 // Blend in visibility order around our own piece (digit d).
                 let d = s.digit(v, round);
                 let mine = s.receives(v, round).next().map(|m| m.range).unwrap_or(0..0);
@@ -341,7 +358,7 @@ pub fn composite<P: Pixel, T: Transport>(
             for round in 0..rounds {
                 if let Some((w, receive)) = tree_partner(v, round, p) {
                     if receive {
-                        let got = t.exchange(round, Vec::new(), &[real(w)])?;
+                        let got = exchange_checked(t, round, Vec::new(), &[real(w)])?;
                         decode_composite(&got[0], &mut acc, true)?;
                     } else {
                         let mut wire = Vec::new();
@@ -368,7 +385,7 @@ pub fn composite<P: Pixel, T: Transport>(
             .filter(|(_, r)| !r.is_empty())
             .collect();
         let from: Vec<u32> = owners.iter().map(|(w, _)| real(*w)).collect();
-        let got = t.exchange(gather_tag, Vec::new(), &from)?;
+        let got = exchange_checked(t, gather_tag, Vec::new(), &from)?;
         for ((_, r), wire) in owners.iter().zip(&got) {
             decode_composite(wire, &mut img[r.start as usize..r.end as usize], true)?;
         }
@@ -445,7 +462,7 @@ pub fn measure_cost_model<T: Transport>(t: &mut T) -> Result<super::CostModel, T
                 t.exchange(TAG + 2 * r, vec![(1, vec![0u8; bytes])], &[])?;
                 t.exchange(TAG + 2 * r + 1, Vec::new(), &[1])?;
             } else if me == 1 {
-                let got = t.exchange(TAG + 2 * r, Vec::new(), &[0])?;
+                let got = exchange_checked(t, TAG + 2 * r, Vec::new(), &[0])?;
                 t.exchange(TAG + 2 * r + 1, got.into_iter().map(|b| (0, b)).collect(), &[])?;
             }
             times.push(t0.elapsed().as_secs_f64() / 2.0);
@@ -468,7 +485,7 @@ pub fn measure_cost_model<T: Transport>(t: &mut T) -> Result<super::CostModel, T
             .collect();
         t.exchange(tag, (1..p).map(|r| (r, bytes.clone())).collect(), &[])?;
     } else {
-        let got = t.exchange(tag, Vec::new(), &[0])?;
+        let got = exchange_checked(t, tag, Vec::new(), &[0])?;
         let f = |i: usize| {
             got[0]
                 .get(8 * i..8 * i + 8)

@@ -248,7 +248,8 @@ impl Pixel for DepthPixel {
     }
 }
 
-/// `x / 255` rounded to nearest, exact for `0 <= x <= 255 * 255`.
+/// `x / 255` rounded to nearest, exact for `0 <= x <= 255 * 255` (larger `x` give an unspecified
+/// value, never a panic).
 ///
 /// ```
 /// use strahl::composite::div255;
@@ -257,10 +258,11 @@ impl Pixel for DepthPixel {
 /// assert_eq!(div255(127), 0); // 0.498 rounds down
 /// assert_eq!(div255(128), 1); // 0.502 rounds up
 /// assert_eq!(div255(200 * 100), 78); // 78.43
+/// let _ = div255(u32::MAX); // out of range: no overflow
 /// ```
 #[inline(always)]
 pub const fn div255(x: u32) -> u32 {
-    let x = x + 128;
+    let x = x.wrapping_add(128);
     (x + (x >> 8)) >> 8
 }
 

@@ -150,7 +150,9 @@ pub fn decode_composite<P: Pixel>(wire: &[u8], acc: &mut [P], acc_in_front: bool
         if e > acc.len() {
             return Err(DecodeError::OutOfRange);
         }
-        let bytes = len * P::BYTES;
+        // `size_of`, not the overridable `P::BYTES`: what `encode` wrote, and what the copy
+        // below needs. `len <= acc.len()`, so it cannot overflow.
+        let bytes = len * core::mem::size_of::<P>();
         let src = wire.get(data..data + bytes).ok_or(DecodeError::Truncated)?;
         // The wire is not aligned for `P`: copy into an aligned scratch buffer.
         scratch.clear();

@@ -101,6 +101,10 @@ impl Transport for ThreadTransport {
             peer.send((self.rank, tag, bytes))
                 .map_err(|_| TransportError("peer hung up"))?;
         }
+        // A rank outside the group never sends: an error now, not a wait for the timeout.
+        if from.iter().any(|&src| src as usize >= self.peers.len()) {
+            return Err(TransportError("no such rank"));
+        }
         let mut out = Vec::with_capacity(from.len());
         for &src in from {
             if let Some(i) = self.early.iter().position(|(f, t, _)| *f == src && *t == tag) {

@@ -34,9 +34,10 @@ impl Tile {
     /// ```
     /// use strahl::composite::Tile;
     /// assert_eq!(Tile { x0: 8, y0: 0, x1: 10, y1: 3 }.pixels(), 6);
+    /// assert_eq!(Tile { x0: 8, y0: 0, x1: 2, y1: 3 }.pixels(), 0); // reversed: empty
     /// ```
     pub fn pixels(&self) -> usize {
-        (self.x1 - self.x0) as usize * (self.y1 - self.y0) as usize
+        self.x1.saturating_sub(self.x0) as usize * self.y1.saturating_sub(self.y0) as usize
     }
 }
 

@@ -488,7 +488,8 @@ pub const fn decode63(code: u64) -> [u32; 3] {
 // ---------------------------------------------------------------------------------------------
 
 /// The 30-bit code of `p`: [`encode30`] of [`MortonQuantizer::quantize_scalar`]. Scalar reference
-/// of [`morton30_x8`]; `q` should come from [`MortonQuantizer::new30`].
+/// of [`morton30_x8`]; `q` should come from [`MortonQuantizer::new30`] (a finer quantizer's cells
+/// are cut to their top 10 bits, so the codes stay in Z-order).
 ///
 /// ```
 /// use strahl::{Aabb, Vec3, geometry::morton::{MORTON30_MAX, MortonQuantizer, morton30_scalar}};
@@ -496,10 +497,14 @@ pub const fn decode63(code: u64) -> [u32; 3] {
 /// assert_eq!(morton30_scalar(Vec3::ZERO, &q), 0);
 /// assert_eq!(morton30_scalar(Vec3::ONE, &q), MORTON30_MAX);
 /// assert_eq!(morton30_scalar(Vec3::new(0.5, 0.0, 0.0), &q), 1 << 29);
+/// // A 63-bit quantizer gives the same code here.
+/// let q63 = MortonQuantizer::new63(&Aabb::new(Vec3::ZERO, Vec3::ONE));
+/// assert_eq!(morton30_scalar(Vec3::new(0.5, 0.0, 0.0), &q63), 1 << 29);
 /// ```
 #[inline]
 pub fn morton30_scalar(p: Vec3, q: &MortonQuantizer) -> u32 {
-    encode30(q.quantize_scalar(p))
+    let sh = q.bits().saturating_sub(10);
+    encode30(q.quantize_scalar(p).map(|c| c >> sh))
 }
 
 /// The 63-bit code of `p`: [`encode63`] of [`MortonQuantizer::quantize_scalar`]. Scalar reference
@@ -615,7 +620,12 @@ fn spread_x8_shuffle<const B: u32, const S: u32>(v: u32x8) -> u32x8 {
 /// ```
 #[inline(always)]
 pub fn morton30_x8(x: f32x8, y: f32x8, z: f32x8, q: &MortonQuantizer) -> u32x8 {
-    let [cx, cy, cz] = q.quantize_x8(x, y, z);
+    let [mut cx, mut cy, mut cz] = q.quantize_x8(x, y, z);
+    let sh = q.bits().saturating_sub(10);
+    if sh > 0 {
+        // A finer quantizer than `new30`'s: its cells cut to their top 10 bits, as the scalar's.
+        (cx, cy, cz) = (cx >> sh, cy >> sh, cz >> sh);
+    }
     spread_x8::<10, 2>(cx) | spread_x8::<10, 1>(cy) | spread_x8::<10, 0>(cz)
 }
 

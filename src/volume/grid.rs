@@ -438,7 +438,7 @@ impl<'a, V: Voxel> Volume<'a, V> {
     /// Errors: [`VolumeError::TooLarge`] if `nx ny nz` overflows or exceeds
     /// [`MAX_VOXELS`](Self::MAX_VOXELS); [`VolumeError::SizeMismatch`] if `data.len()` differs from
     /// it; [`VolumeError::InvalidGeometry`] unless `spacing` is finite and positive and `origin`
-    /// finite. Zero dimensions with empty `data` make a valid, empty volume.
+    /// and the far corner `origin + (dims - 1) spacing` finite. Zero dimensions with empty `data` make a valid, empty volume.
     ///
     /// ```
     /// use strahl::{Vec3, volume::{Volume, VolumeError}};
@@ -449,6 +449,10 @@ impl<'a, V: Voxel> Volume<'a, V> {
     /// let err = Volume::new(&data, [3, 2, 1], Vec3::new(1.0, 0.0, 1.0), Vec3::ZERO).unwrap_err();
     /// assert_eq!(err, VolumeError::InvalidGeometry); // zero spacing
     /// assert!(Volume::<f32>::new(&[], [0, 5, 5], Vec3::ONE, Vec3::ZERO).unwrap().is_empty());
+    /// assert!(Volume::<u8>::new(&[], [1 << 16, 1 << 16, 0], Vec3::ONE, Vec3::ZERO).unwrap().is_empty());
+    /// // Bounds that overflow `f32`: the far corner at 3e38 + 3e38.
+    /// let err = Volume::new(&[1.0f32; 8], [2, 2, 2], Vec3::splat(3e38), Vec3::splat(3e38)).unwrap_err();
+    /// assert_eq!(err, VolumeError::InvalidGeometry);
     /// ```
     pub fn new(data: &'a [V], dims: [u32; 3], spacing: Vec3, origin: Vec3) -> Result<Self, VolumeError> {
         let n = Self::voxel_count(dims)?;
@@ -458,18 +462,22 @@ impl<'a, V: Voxel> Volume<'a, V> {
                 actual: data.len(),
             });
         }
-        if !(spacing.is_finite() && spacing.cmpgt(Vec3::ZERO).all() && origin.is_finite()) {
+        let gmax = dims.map(|d| d.saturating_sub(1) as f32);
+        // The far corner too: a volume whose bounds overflow could not be marched.
+        let far = origin + Vec3::from_array(gmax) * spacing;
+        if !(spacing.is_finite() && spacing.cmpgt(Vec3::ZERO).all() && origin.is_finite() && far.is_finite()) {
             return Err(VolumeError::InvalidGeometry);
         }
         let (nx, ny) = (dims[0] as i32, dims[1] as i32);
-        let stride = [1, nx, nx * ny];
+        // `nx ny <= n <= i32::MAX` unless the volume is empty (then no voxel is ever read).
+        let stride = if n == 0 { [0; 3] } else { [1, nx, nx * ny] };
         Ok(Self {
             data,
             dims,
             spacing,
             origin,
             inv_spacing: Vec3::ONE / spacing,
-            gmax: dims.map(|d| d.saturating_sub(1) as f32),
+            gmax,
             cmax: dims.map(|d| d.saturating_sub(2) as i32),
             stride,
             next: core::array::from_fn(|a| if dims[a] > 1 { stride[a] } else { 0 }),

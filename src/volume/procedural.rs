@@ -144,7 +144,9 @@ pub fn torus(n: u32, major: f32, minor: f32) -> Vec<u8> {
 }
 
 /// `w x h` rays from a pinhole camera at `eye` looking at `target` (up is `+z`, or `+y` when
-/// looking along z), vertical field of view `fov_deg`, row by row from the top left.
+/// looking along z), vertical field of view `fov_deg`, row by row from the top left. Where `eye`
+/// and `target` coincide (no direction to look in) the rays are invalid and hit nothing; an
+/// image of more than `u32::MAX` pixels (which could not be allocated anyway) gives no rays.
 ///
 /// ```
 /// use strahl::Vec3;
@@ -152,6 +154,8 @@ pub fn torus(n: u32, major: f32, minor: f32) -> Vec<u8> {
 /// let rays = pinhole_rays(Vec3::new(0.0, -3.0, 0.0), Vec3::ZERO, 40.0, 4, 3);
 /// assert_eq!(rays.len(), 12);
 /// assert!(rays.iter().all(|r| r.direction.y > 0.0));
+/// assert!(pinhole_rays(Vec3::ZERO, Vec3::ZERO, 40.0, 2, 2).iter().all(|r| !r.is_valid()));
+/// assert!(pinhole_rays(Vec3::ZERO, Vec3::X, 40.0, 1 << 16, 1 << 16).is_empty());
 /// ```
 pub fn pinhole_rays(eye: Vec3, target: Vec3, fov_deg: f32, w: u32, h: u32) -> Vec<Ray> {
     let fwd = (target - eye).normalize();
@@ -164,7 +168,10 @@ pub fn pinhole_rays(eye: Vec3, target: Vec3, fov_deg: f32, w: u32, h: u32) -> Ve
     let up = right.cross(fwd);
     let half = libm::tanf(fov_deg.to_radians() / 2.0);
     let aspect = w as f32 / h.max(1) as f32;
-    let mut rays = Vec::with_capacity((w * h) as usize);
+    let Some(n) = w.checked_mul(h) else {
+        return Vec::new();
+    };
+    let mut rays = Vec::with_capacity(n as usize);
     for y in 0..h {
         for x in 0..w {
             let u = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * half * aspect;
