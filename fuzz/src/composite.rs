@@ -584,11 +584,11 @@ fn check_wire<P: FuzzPixel>(px: &[P], grid: bool) {
             .filter(|&i| px[i] != P::EMPTY && (i == 0 || px[i - 1] == P::EMPTY))
             .count();
         let want = if sparse {
-            4 + 8 * runs + active.len() * P::BYTES
+            8 + 8 * runs + active.len() * P::BYTES
         } else if px.is_empty() {
-            4
+            8
         } else {
-            12 + px.len() * P::BYTES
+            16 + px.len() * P::BYTES
         };
         assert_eq!(wire.len(), want, "sparse {sparse}: {} pixels", px.len());
         let mut acc = vec![P::EMPTY; px.len()];
@@ -622,8 +622,16 @@ fn check_wire<P: FuzzPixel>(px: &[P], grid: bool) {
             Some(px.len()).filter(|&n| n > 0)
         };
         if let Some(end) = end {
+            // Into a shorter range: refused by the length in the header.
             assert_eq!(
                 decode_composite(wire, &mut acc[..end - 1], true),
+                Err(DecodeError::LengthMismatch)
+            );
+            // The same message claiming that shorter length: its runs reach past it.
+            let mut forged = wire.to_vec();
+            forged[4..8].copy_from_slice(&((end - 1) as u32).to_le_bytes());
+            assert_eq!(
+                decode_composite(&forged, &mut acc[..end - 1], true),
                 Err(DecodeError::OutOfRange)
             );
         }

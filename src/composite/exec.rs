@@ -238,9 +238,9 @@ pub struct Plan<'a> {
 ///     let plan = Plan { schedule: Schedule::RadixK(KVec::direct_send(2)), order: &order, root: 0, sparse: true };
 ///     composite(t, &[RgbaF32([0.5; 4]); 10], &plan).unwrap().1
 /// });
-/// // Each rank sends the other one half: a header of one run (12 bytes) and 5 pixels of 16 bytes.
-/// assert_eq!((stats[0].messages, stats[0].bytes_sent), (1, 12 + 5 * 16));
-/// assert_eq!((stats[0].gather_bytes, stats[1].gather_bytes), (0, 12 + 5 * 16)); // rank 1 to the root
+/// // Each rank sends the other one half: a header of one run (16 bytes) and 5 pixels of 16 bytes.
+/// assert_eq!((stats[0].messages, stats[0].bytes_sent), (1, 16 + 5 * 16));
+/// assert_eq!((stats[0].gather_bytes, stats[1].gather_bytes), (0, 16 + 5 * 16)); // rank 1 to the root
 /// assert_eq!(stats[0].round_seconds.len(), 2); // one round, then the gather
 /// ```
 #[derive(Clone, Debug, Default, PartialEq)]

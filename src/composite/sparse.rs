@@ -1,10 +1,11 @@
 //! Sparse image pieces on the wire: run-length encoding of the non-empty pixels of a range, as
 //! IceT does, so ranks send and blend only the pixels they covered.
 //!
-//! Layout (little-endian): `u32 runs`, then `runs` pairs `(u32 skip, u32 len)` (empty pixels to skip,
-//! then active pixels that follow), then the active pixels' bytes back to back. A range that is
-//! entirely empty is 4 bytes; a dense range is 12 bytes plus its pixels. The leading and trailing
-//! skips make the encoding also a bounding interval of the active pixels.
+//! Layout (little-endian): `u32 runs`, `u32 pixels` (the range's length, which the receiver's
+//! range must match), then `runs` pairs `(u32 skip, u32 len)` (empty pixels to skip, then active
+//! pixels that follow), then the active pixels' bytes back to back. A range that is entirely
+//! empty is 8 bytes; a dense range is 16 bytes plus its pixels. The leading skips make the
+//! encoding also a bounding interval of the active pixels.
 
 use super::pixel::Pixel;
 use alloc::vec::Vec;
@@ -15,14 +16,14 @@ use alloc::vec::Vec;
 /// use strahl::composite::{Pixel, RgbaF32, encode, sparse::header_bytes};
 /// let mut wire = Vec::new();
 /// encode(&[RgbaF32::EMPTY; 8], true, &mut wire);
-/// assert_eq!(wire.len(), header_bytes(0)); // all empty: only the run count
+/// assert_eq!(wire.len(), header_bytes(0)); // all empty: only the run count and the length
 /// let (a, e) = (RgbaF32([1.0; 4]), RgbaF32::EMPTY);
 /// wire.clear();
 /// encode(&[a, e, a], true, &mut wire);
 /// assert_eq!(wire.len(), header_bytes(2) + 2 * RgbaF32::BYTES);
 /// ```
 pub const fn header_bytes(runs: usize) -> usize {
-    4 + 8 * runs
+    8 + 8 * runs
 }
 
 /// Appends the encoding of `pixels` to `out`. With `sparse == false` the whole range is one run
@@ -34,7 +35,7 @@ pub const fn header_bytes(runs: usize) -> usize {
 /// let px = [e, RgbaF32([0.5; 4]), RgbaF32([0.5; 4]), e, e];
 /// let mut wire = Vec::new();
 /// encode(&px, true, &mut wire);
-/// assert_eq!(wire.len(), 4 + 8 + 2 * 16); // one run of two pixels
+/// assert_eq!(wire.len(), 8 + 8 + 2 * 16); // one run of two pixels
 /// let mut acc = [e; 5];
 /// decode_composite(&wire, &mut acc, true).unwrap();
 /// assert_eq!(acc, px);
@@ -42,6 +43,8 @@ pub const fn header_bytes(runs: usize) -> usize {
 pub fn encode<P: Pixel>(pixels: &[P], sparse: bool, out: &mut Vec<u8>) {
     let start = out.len();
     out.extend_from_slice(&0u32.to_le_bytes());
+    // (A range beyond `u32::MAX` pixels, which `composite` refuses, would not decode anywhere.)
+    out.extend_from_slice(&u32::try_from(pixels.len()).unwrap_or(u32::MAX).to_le_bytes());
     let mut runs = 0u32;
     let mut active: Vec<(usize, usize)> = Vec::new();
     if !sparse {
@@ -83,7 +86,7 @@ pub fn encode<P: Pixel>(pixels: &[P], sparse: bool, out: &mut Vec<u8>) {
 /// let mut wire = Vec::new();
 /// encode(&[RgbaF32([1.0; 4]); 3], true, &mut wire);
 /// let (mut two, mut three) = ([RgbaF32::EMPTY; 2], [RgbaF32::EMPTY; 3]);
-/// assert_eq!(decode_composite(&wire, &mut two, true), Err(DecodeError::OutOfRange));
+/// assert_eq!(decode_composite(&wire, &mut two, true), Err(DecodeError::LengthMismatch));
 /// assert_eq!(decode_composite(&wire[..wire.len() - 1], &mut three, true), Err(DecodeError::Truncated));
 /// wire.push(0);
 /// assert_eq!(decode_composite(&wire, &mut three, true), Err(DecodeError::TrailingBytes));
@@ -94,6 +97,9 @@ pub enum DecodeError {
     Truncated,
     /// The runs reach past the end of the range they are composited into.
     OutOfRange,
+    /// The piece was encoded from a range of another length than the one it is composited into
+    /// (ranks with images of different sizes).
+    LengthMismatch,
     /// Bytes are left over after the last pixel.
     TrailingBytes,
 }
@@ -103,6 +109,7 @@ impl core::fmt::Display for DecodeError {
         f.write_str(match self {
             Self::Truncated => "compositing message is truncated",
             Self::OutOfRange => "compositing message runs past its pixel range",
+            Self::LengthMismatch => "compositing message is for a pixel range of another length",
             Self::TrailingBytes => "compositing message has trailing bytes",
         })
     }
@@ -133,9 +140,12 @@ pub fn decode_composite<P: Pixel>(wire: &[u8], acc: &mut [P], acc_in_front: bool
         Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
     };
     let runs = word(0)?;
+    if word(4)? != acc.len() {
+        return Err(DecodeError::LengthMismatch);
+    }
     let header = runs
         .checked_mul(8)
-        .and_then(|r| r.checked_add(4))
+        .and_then(|r| r.checked_add(8))
         .ok_or(DecodeError::Truncated)?;
     if header > wire.len() {
         return Err(DecodeError::Truncated);
@@ -144,7 +154,7 @@ pub fn decode_composite<P: Pixel>(wire: &[u8], acc: &mut [P], acc_in_front: bool
     let mut at = 0usize;
     let mut scratch: Vec<P> = Vec::new();
     for r in 0..runs {
-        let (skip, len) = (word(4 + 8 * r)?, word(8 + 8 * r)?);
+        let (skip, len) = (word(8 + 8 * r)?, word(12 + 8 * r)?);
         let s = at.checked_add(skip).ok_or(DecodeError::OutOfRange)?;
         let e = s.checked_add(len).ok_or(DecodeError::OutOfRange)?;
         if e > acc.len() {
@@ -193,7 +203,7 @@ mod tests {
         }
         let mut wire = Vec::new();
         encode(&[e; 100], true, &mut wire);
-        assert_eq!(wire.len(), 4);
+        assert_eq!(wire.len(), 8);
     }
 
     #[test]
@@ -206,9 +216,15 @@ mod tests {
         );
         let mut wire = Vec::new();
         encode(&[RgbaF32([1.0; 4]); 5], true, &mut wire);
+        assert_eq!(
+            decode_composite(&wire, &mut acc, true),
+            Err(DecodeError::LengthMismatch)
+        );
+        // The same runs with a header that claims 4 pixels: they reach past the range.
+        wire[4..8].copy_from_slice(&4u32.to_le_bytes());
         assert_eq!(decode_composite(&wire, &mut acc, true), Err(DecodeError::OutOfRange));
         let mut wire = Vec::new();
-        encode(&[RgbaF32([1.0; 4]); 2], true, &mut wire);
+        encode(&[RgbaF32([1.0; 4]); 4], true, &mut wire);
         wire.push(0);
         assert_eq!(decode_composite(&wire, &mut acc, true), Err(DecodeError::TrailingBytes));
         wire.truncate(wire.len() - 5);
@@ -218,7 +234,7 @@ mod tests {
             decode_composite(&[255, 255, 255, 255], &mut acc, true),
             Err(DecodeError::Truncated)
         );
-        let mut huge = vec![1, 0, 0, 0];
+        let mut huge = vec![1, 0, 0, 0, 4, 0, 0, 0];
         huge.extend_from_slice(&u32::MAX.to_le_bytes());
         huge.extend_from_slice(&u32::MAX.to_le_bytes());
         assert_eq!(decode_composite(&huge, &mut acc, true), Err(DecodeError::OutOfRange));
