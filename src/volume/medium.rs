@@ -412,7 +412,10 @@ impl<'a, V: Voxel> VolumeMedium<'a, V> {
     ///
     /// Errors: [`VolumeError::GridMismatch`] if the grid was built for other dimensions,
     /// [`VolumeError::StaleGrid`] if it was not classified with this transfer function (compared by
-    /// [`TransferFunction::fingerprint`]).
+    /// [`TransferFunction::fingerprint`]). The voxels themselves are not compared (that would read
+    /// them all): a grid built from other data of the same dimensions, or before the data
+    /// changed, skips blocks by the old values; build it again
+    /// ([`MacrocellGrid::build`](super::MacrocellGrid::build)) after the voxels change.
     ///
     /// ```
     /// # use strahl::{Vec3, math::f32x8, volume::*};

@@ -763,7 +763,9 @@ impl<'a, V: Voxel> PreintegratedMedium<'a, V> {
     /// (see [`skip`](super::skip) for why, with segments in place of samples).
     ///
     /// Errors: [`VolumeError::GridMismatch`] for a grid of other dimensions,
-    /// [`VolumeError::StaleGrid`] if it was not classified for this table.
+    /// [`VolumeError::StaleGrid`] if it was not classified for this table. The voxels are not
+    /// compared: build the grid again after they change (see
+    /// [`VolumeMedium::with_grid`](super::VolumeMedium::with_grid)).
     ///
     /// ```
     /// use strahl::Vec3;
