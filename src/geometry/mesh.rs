@@ -259,9 +259,15 @@ impl Triangles for IndexedMesh<'_> {
     /// The index triple (its vertices are only known once it has arrived).
     #[inline]
     fn prefetch(&self, i: usize) {
-        if let Some(t) = self.indices.get(i) {
-            crate::math::prefetch(t);
-        }
+        prefetch_triple(self.indices, i);
+    }
+}
+
+/// Asks the cache for index triple `i` of an indexed mesh (ignored out of range).
+#[inline]
+fn prefetch_triple(indices: &[[u32; 3]], i: usize) {
+    if let Some(t) = indices.get(i) {
+        crate::math::prefetch(t);
     }
 }
 
@@ -387,9 +393,7 @@ impl Triangles for StridedMesh<'_> {
     /// The index triple (its vertices are only known once it has arrived).
     #[inline]
     fn prefetch(&self, i: usize) {
-        if let Some(t) = self.indices.get(i) {
-            crate::math::prefetch(t);
-        }
+        prefetch_triple(self.indices, i);
     }
 }
 
