@@ -156,8 +156,9 @@ fn bytes_sent_within_n_one_minus_one_over_p() {
             let Schedule::RadixK(k) = s else { continue };
             let (_, bytes) = run(&images, &order, s, 0, false);
             let messages: u32 = k.as_slice().iter().map(|k| k - 1).sum();
-            // Headers: 16 bytes per dense message; uneven splits: one pixel per piece.
-            let slack = messages as f64 * 16.0 + k.as_slice().iter().sum::<u32>() as f64 * b;
+            // Headers: one run's per dense message; uneven splits: one pixel per piece.
+            let header = strahl::composite::sparse::header_bytes(1) as f64;
+            let slack = messages as f64 * header + k.as_slice().iter().sum::<u32>() as f64 * b;
             let bound = n as f64 * (1.0 - 1.0 / p as f64) * b + slack;
             for (r, &sent) in bytes.iter().enumerate() {
                 assert!(sent as f64 <= bound, "p {p} {k:?} rank {r}: {sent} > {bound}");

@@ -680,7 +680,8 @@ fn check_stats(run: &Run, stats: &CompositeStats, p: u32, n: usize, bytes: usize
             assert_eq!(stats.round_seconds.len(), k.rounds() + 1);
             if !run.sparse {
                 let b = bytes as f64;
-                let slack = f64::from(messages) * 12.0 + f64::from(k.as_slice().iter().sum::<u32>()) * b;
+                let header = strahl::composite::sparse::header_bytes(1) as f64;
+                let slack = f64::from(messages) * header + f64::from(k.as_slice().iter().sum::<u32>()) * b;
                 let bound = n as f64 * (1.0 - 1.0 / f64::from(p)) * b + slack;
                 assert!(
                     stats.bytes_sent as f64 <= bound,

@@ -258,12 +258,12 @@ impl Pixel for DepthPixel {
 /// assert_eq!(div255(127), 0); // 0.498 rounds down
 /// assert_eq!(div255(128), 1); // 0.502 rounds up
 /// assert_eq!(div255(200 * 100), 78); // 78.43
-/// let _ = div255(u32::MAX); // out of range: no overflow
+/// let _ = (div255(u32::MAX), div255(0xFFFF_0000)); // out of range: no overflow
 /// ```
 #[inline(always)]
 pub const fn div255(x: u32) -> u32 {
     let x = x.wrapping_add(128);
-    (x + (x >> 8)) >> 8
+    x.wrapping_add(x >> 8) >> 8
 }
 
 /// Scalar reference for f32 over on interleaved RGBA (`acc.len() == other.len()`, a multiple of 4;

@@ -350,7 +350,8 @@ impl<'a> StridedMesh<'a> {
     /// ```
     /// use strahl::geometry::StridedMesh;
     /// let bytes = [0u8; 100];
-    /// assert_eq!(StridedMesh::new(&bytes, 32, &[]).unwrap().vertices(), 3); // at 0, 32, 64 (88 < 100 < 108)
+    /// // Vertices at 0, 32 and 64; a fourth at 96 would end at 108, past the 100 bytes.
+    /// assert_eq!(StridedMesh::new(&bytes, 32, &[]).unwrap().vertices(), 3);
     /// ```
     pub fn vertices(&self) -> usize {
         self.count

@@ -1154,8 +1154,8 @@ fn counts_in_index_order(bvh: &Bvh2, counts: &mut [u32]) -> bool {
 impl<L: Lane, const N: usize> BvhWide<L, N> {
     /// Builds an `N`-wide BVH over `tris` in one call: the binary tree with `params`
     /// ([`Bvh2::build`]), then the cost-optimal collapse ([`from_bvh2`](Self::from_bvh2)); the
-    /// binary tree is dropped. The build's statistics (triangles left out, depth, leaves) come
-    /// with it. To keep the binary tree, refit it, or reuse memory across rebuilds, call the two
+    /// binary tree is dropped. The binary build's statistics come with it (triangles left out;
+    /// its nodes, leaves and depth are the binary tree's, not the wide one's). To keep the binary tree, refit it, or reuse memory across rebuilds, call the two
     /// steps ([`Builder`](crate::build::Builder), [`Collapser`]).
     ///
     /// ```

@@ -393,7 +393,11 @@ impl<T: TriangleTest, const CONSERVATIVE: bool> TriangleTest for WithBoxes<T, CO
 /// `*_filtered` forms ([`BvhWide::intersect_filtered`](crate::layout::BvhWide::intersect_filtered),
 /// [`BvhWide::occluded_filtered`](crate::layout::BvhWide::occluded_filtered),
 /// [`wide::intersect_filtered`], [`intersect_scalar_filtered`], [`intersect_brute_force_filtered`],
-/// and their any-hit forms); every closure `FnMut(&Hit) -> bool` is one.
+/// and their any-hit forms), the packets in [`packet::intersect_packet_filtered`] and
+/// [`packet::occluded_packet_filtered`], and the instances (over [`InstanceHit`](crate::layout::InstanceHit)s)
+/// in [`Tlas::intersect_filtered`](crate::layout::Tlas::intersect_filtered) and
+/// [`Tlas::intersect_masked_filtered`](crate::layout::Tlas::intersect_masked_filtered); every
+/// closure `FnMut(&Hit) -> bool` is one.
 ///
 /// The closest hit is then the nearest hit the filter accepts (ties as without a filter), and
 /// an any-hit query reports whether some hit is accepted. The traversals offer hits in no fixed

@@ -522,6 +522,11 @@ impl<'a, V: Voxel> Volume<'a, V> {
     }
 
     fn voxel_count(dims: [u32; 3]) -> Result<usize, VolumeError> {
+        // An empty volume is valid whatever its other dimensions (even where their product
+        // would overflow a 32-bit `usize`).
+        if dims.contains(&0) {
+            return Ok(0);
+        }
         let n = (dims[0] as usize)
             .checked_mul(dims[1] as usize)
             .and_then(|n| n.checked_mul(dims[2] as usize))

@@ -16,7 +16,9 @@
 //! The named functions are thin wrappers of the generic [`intersect_packet`], [`occluded_packet`],
 //! [`intersect_packet_bvh2`] and [`occluded_packet_bvh2`]; the batch functions
 //! ([`intersect_batch_packets`], [`intersect_batch_bvh2`], ...) cut a slice into packets, and
-//! [`TileShape`] lays out camera rays so that each packet is a coherent pixel tile.
+//! [`TileShape`] lays out camera rays so that each packet is a coherent pixel tile. Hit filters
+//! ([`HitFilter`]: alpha tests) go with wide-BVH packets through [`intersect_packet_filtered`]
+//! and [`occluded_packet_filtered`].
 //!
 //! # Wide BVHs
 //! - **Coherent packets** (every active lane with the same direction signs, directions within
