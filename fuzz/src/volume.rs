@@ -381,14 +381,20 @@ fn check_typed<V: FuzzVoxel>(case: &VolumeCase, data: &[V]) -> VolumeReport {
 
     // Volume construction: InvalidGeometry exactly when documented.
     let (sp, or) = (case.spacing, case.origin);
-    let geometry_ok = sp.is_finite() && sp.x > 0.0 && sp.y > 0.0 && sp.z > 0.0 && or.is_finite();
+    // The far corner `origin + (dims - 1) spacing` must be finite too (bounds that overflow).
+    let far = or + Vec3::from_array(case.dims.map(|d| d.saturating_sub(1) as f32)) * sp;
+    let geometry_ok = sp.is_finite() && sp.x > 0.0 && sp.y > 0.0 && sp.z > 0.0 && or.is_finite() && far.is_finite();
     let vol = match Volume::new(data, case.dims, sp, or) {
         Ok(v) => {
             assert!(geometry_ok, "spacing {sp} origin {or} accepted");
             v
         }
         Err(e) => {
-            assert!(!geometry_ok, "spacing {sp} origin {or} refused: {e}");
+            assert!(
+                !geometry_ok,
+                "spacing {sp} origin {or} dims {:?} refused: {e}",
+                case.dims
+            );
             assert_eq!(e, VolumeError::InvalidGeometry);
             Volume::new(data, case.dims, Vec3::ONE, Vec3::ZERO).expect("a valid volume")
         }
