@@ -91,11 +91,21 @@ pub fn intersect_filtered<T: TriangleTest, L: Lane, const N: usize, F: HitFilter
     ray: &Ray,
     mut filter: F,
 ) -> Option<Hit> {
+    intersect_filtered_by::<T, L, N, F>(bvh, ray, &mut filter)
+}
+
+/// [`intersect_filtered`] with the filter borrowed (the packets' single rays share one).
+#[inline]
+pub(crate) fn intersect_filtered_by<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
+    bvh: BvhWideRef<'_, L, N>,
+    ray: &Ray,
+    f: &mut F,
+) -> Option<Hit> {
     let mut r = prepare::<T>(ray);
     if r.is_empty() || bvh.nodes.is_empty() {
         return None;
     }
-    intersect_from_filtered::<T, L, N, F>(bvh, 0, &mut r, &mut filter)
+    intersect_from_filtered::<T, L, N, F>(bvh, 0, &mut r, f)
 }
 
 /// [`occluded`] counting only the hits `filter` accepts ([`HitFilter`]): `true` if `ray` hits,

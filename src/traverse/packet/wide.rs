@@ -8,7 +8,7 @@ use crate::intersect::aabb::FAR_SLACK;
 use crate::intersect::{PreparedPacket, PreparedRay};
 use crate::layout::{BvhWideRef, EMPTY_CHILD, LEAF_BIT, MAX_WIDE_DEPTH, leaf_packs};
 use crate::math::Lane;
-use crate::traverse::wide::{intersect_from_filtered, occluded_from_filtered};
+use crate::traverse::wide::{intersect_filtered_by, intersect_from_filtered, occluded_from_filtered};
 use crate::traverse::{HitFilter, TriangleTest, prepare};
 
 /// Stack entries: enough for `MAX_WIDE_DEPTH` levels of 8-wide nodes.
@@ -498,21 +498,6 @@ fn copy_out<T: Copy, const K: usize>(dst: &mut [T], src: &[T; K]) {
     }
 }
 
-/// One ray's closest hit that `f` accepts, as [`wide::intersect_filtered`](crate::traverse::wide::intersect_filtered)
-/// (without taking the filter by value).
-#[inline(always)]
-fn closest_single<T: TriangleTest, L: Lane, const N: usize, F: HitFilter>(
-    bvh: BvhWideRef<'_, L, N>,
-    ray: &Ray,
-    f: &mut F,
-) -> Option<Hit> {
-    let mut r = prepare::<T>(ray);
-    if r.is_empty() || bvh.nodes.is_empty() {
-        return None;
-    }
-    intersect_from_filtered::<T, L, N, F>(bvh, 0, &mut r, f)
-}
-
 /// Closest hits of up to `K` rays that `f` accepts (see
 /// [`intersect_packet_filtered`](super::intersect_packet_filtered)).
 pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const K: usize, F: HitFilter>(
@@ -527,7 +512,7 @@ pub(super) fn intersect<T: TriangleTest, L: Lane, const N: usize, R: Lane, const
     let (active, coherent, lanes) = match start::<T, L, N, R, K>(bvh, &rays[..n], switch, &mut single) {
         Start::Singles => {
             for (h, r) in hits[..n].iter_mut().zip(rays) {
-                *h = closest_single::<T, L, N, F>(bvh, r, f);
+                *h = intersect_filtered_by::<T, L, N, F>(bvh, r, f);
             }
             return;
         }
